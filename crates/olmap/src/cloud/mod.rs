@@ -1,0 +1,12 @@
+//! Point clouds and the filters users apply to them.
+//!
+//! A [`PointCloud`] stores positions in single precision (metres, in the cloud's own frame),
+//! optional per-point intensity, normals and colours, and the sensor origin in that frame.
+//! Filters return new clouds and keep every attribute in step with the positions.
+
+mod filters;
+mod point_cloud;
+mod stats;
+
+pub use point_cloud::PointCloud;
+pub use stats::{CloudStats, RangeStats};

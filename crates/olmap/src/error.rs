@@ -1,0 +1,136 @@
+//! Typed errors of the library.
+//!
+//! Every error that concerns a file names the file and, where it can, the line or byte
+//! offset and what was expected there. Parsers work on streams without a path and return a
+//! [`ParseError`]; the path-level functions in [`crate::io`] wrap it into [`Error::Read`]
+//! together with the path and the format.
+
+use std::fmt;
+use std::path::PathBuf;
+
+/// Where in a stream a parse problem was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Location {
+    /// A 1-based line number in a text file (or in the text header of a binary file).
+    Line(usize),
+    /// A 0-based byte offset in a binary file.
+    Byte(u64),
+    /// A 0-based point (record) index.
+    Point(u64),
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Location::Line(n) => write!(f, "line {n}"),
+            Location::Byte(n) => write!(f, "byte {n}"),
+            Location::Point(n) => write!(f, "point {n}"),
+        }
+    }
+}
+
+/// A problem found while parsing a stream (no path attached yet).
+#[derive(Debug, thiserror::Error)]
+pub enum ParseError {
+    /// The underlying reader failed.
+    #[error("read failed: {0}")]
+    Io(#[from] std::io::Error),
+    /// The stream holds no data at all.
+    #[error("the file is empty")]
+    Empty,
+    /// The stream ended before the data its header announced.
+    #[error("the file ends early: {0}")]
+    Truncated(String),
+    /// Content that does not follow the format, at a known place.
+    #[error("{at}: {reason}")]
+    Invalid {
+        /// Where the problem is.
+        at: Location,
+        /// What was wrong and what was expected.
+        reason: String,
+    },
+    /// Content that does not follow the format, with no single place to name.
+    #[error("{0}")]
+    Malformed(String),
+    /// A valid file using a feature this reader does not support.
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+}
+
+impl ParseError {
+    /// Shorthand for [`ParseError::Invalid`].
+    pub fn at(at: Location, reason: impl Into<String>) -> Self {
+        ParseError::Invalid {
+            at,
+            reason: reason.into(),
+        }
+    }
+
+    /// Shorthand for [`ParseError::Invalid`] at a 1-based line.
+    pub fn line(line: usize, reason: impl Into<String>) -> Self {
+        Self::at(Location::Line(line), reason)
+    }
+}
+
+/// The library's error type.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be opened, created or renamed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// A path that should be a regular file is a directory.
+    #[error("{path}: is a directory, expected a file")]
+    IsDirectory {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// The format of a file could not be told from its name or content.
+    #[error("{path}: unknown file format: {reason}")]
+    UnknownFormat {
+        /// The file concerned.
+        path: PathBuf,
+        /// Why no format matched, and which ones are known.
+        reason: String,
+    },
+    /// A file could not be parsed.
+    #[error("{path}: not a valid {format} file: {source}")]
+    Read {
+        /// The file concerned.
+        path: PathBuf,
+        /// The format it was read as.
+        format: &'static str,
+        /// What was wrong.
+        source: ParseError,
+    },
+    /// A file could not be written.
+    #[error("{path}: cannot write {format}: {reason}")]
+    Write {
+        /// The file concerned.
+        path: PathBuf,
+        /// The format being written.
+        format: &'static str,
+        /// What was wrong.
+        reason: String,
+    },
+    /// A parameter or request that cannot be honoured.
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+}
+
+impl Error {
+    /// Wraps an IO error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// `Result` with the library's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

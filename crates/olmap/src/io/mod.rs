@@ -1,0 +1,490 @@
+//! Reading and writing point clouds and poses in the formats robots and tools produce.
+//!
+//! | format | extensions | read | write | notes |
+//! |---|---|---|---|---|
+//! | PCD v0.7 (PCL) | `.pcd` | ascii, binary, binary_compressed | all three | [`pcd`] |
+//! | PLY | `.ply` | ascii, binary LE/BE | binary LE, ascii | [`ply`] |
+//! | XYZ text | `.xyz .txt .dat .asc .pts` | yes | yes | [`xyz`] |
+//! | 3DTK "uos" | `.3d` | yes (to RH metres) | yes | [`uos`] |
+//! | CSV point table | `.csv` | yes | yes | [`csv`] |
+//! | KITTI velodyne | `.bin` | yes | yes | [`kitti`] |
+//! | OctoMap ScanGraph | `.graph` | yes | yes | [`scan_graph`] |
+//!
+//! Any of them may be bzip2-compressed (`scan.dat.bz2`): the reader decompresses on the fly
+//! and picks the format from the inner extension. Where the extension is unknown, the
+//! content decides for the formats with a signature (PLY, PCD). Poses: [`slam6d`] (3DTK
+//! `.pose` and `.frames`), [`csv::read_pose_table`] (libpointmatcher `carCloudList.csv`) and
+//! [`crate::geometry::PoseList`] (olmap's pose list).
+//!
+//! Every reader drops points with a non-finite coordinate and counts them in
+//! [`ReadReport::dropped_non_finite`]. Writers write to a temporary file beside the target
+//! and rename it into place, so a failed write never leaves a half-written file.
+
+pub mod csv;
+pub mod kitti;
+pub mod lzf;
+pub mod pcd;
+pub mod ply;
+pub mod scan_graph;
+pub mod slam6d;
+pub(crate) mod text;
+pub mod uos;
+pub mod xyz;
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::cloud::PointCloud;
+use crate::error::{Error, ParseError, Result};
+
+/// The point-cloud file formats olmap knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CloudFormat {
+    /// PCL's Point Cloud Data format, version 0.7.
+    Pcd,
+    /// The Polygon File Format (Stanford).
+    Ply,
+    /// Plain text, one point per line: `x y z [ignored columns]`.
+    Xyz,
+    /// 3DTK's "uos" `.3d` text format (left-handed centimetres, converted on read).
+    Uos,
+    /// A CSV point table with or without a header (libpointmatcher style).
+    Csv,
+    /// KITTI velodyne scans: little-endian float32 records `x y z intensity`.
+    KittiBin,
+    /// OctoMap's binary ScanGraph (`.graph`): scans with their poses.
+    ScanGraph,
+}
+
+impl CloudFormat {
+    /// Every format, in the order of the module table.
+    pub const ALL: [CloudFormat; 7] = [
+        CloudFormat::Pcd,
+        CloudFormat::Ply,
+        CloudFormat::Xyz,
+        CloudFormat::Uos,
+        CloudFormat::Csv,
+        CloudFormat::KittiBin,
+        CloudFormat::ScanGraph,
+    ];
+
+    /// A short human name.
+    pub fn name(self) -> &'static str {
+        match self {
+            CloudFormat::Pcd => "PCD",
+            CloudFormat::Ply => "PLY",
+            CloudFormat::Xyz => "XYZ text",
+            CloudFormat::Uos => "3DTK .3d",
+            CloudFormat::Csv => "CSV point table",
+            CloudFormat::KittiBin => "KITTI .bin",
+            CloudFormat::ScanGraph => "OctoMap ScanGraph",
+        }
+    }
+
+    /// The file extensions (lower case, no dot) that select this format.
+    pub fn extensions(self) -> &'static [&'static str] {
+        match self {
+            CloudFormat::Pcd => &["pcd"],
+            CloudFormat::Ply => &["ply"],
+            CloudFormat::Xyz => &["xyz", "txt", "dat", "asc", "pts"],
+            CloudFormat::Uos => &["3d"],
+            CloudFormat::Csv => &["csv"],
+            CloudFormat::KittiBin => &["bin"],
+            CloudFormat::ScanGraph => &["graph"],
+        }
+    }
+
+    /// The format selected by an extension (case-insensitive, no dot).
+    pub fn from_extension(ext: &str) -> Option<Self> {
+        let ext = ext.to_ascii_lowercase();
+        Self::ALL
+            .into_iter()
+            .find(|f| f.extensions().contains(&ext.as_str()))
+    }
+
+    /// Parses a user-facing format name (`pcd`, `ply`, `xyz`, `3d`, `csv`, `kitti`, `graph`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name.to_ascii_lowercase().as_str() {
+            "kitti" => Some(CloudFormat::KittiBin),
+            "uos" | "3dtk" => Some(CloudFormat::Uos),
+            "scangraph" => Some(CloudFormat::ScanGraph),
+            other => Self::from_extension(other),
+        }
+    }
+
+    fn list_extensions() -> String {
+        Self::ALL
+            .iter()
+            .flat_map(|f| f.extensions().iter().map(|e| format!(".{e}")))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
+impl std::fmt::Display for CloudFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Options for reading clouds.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// Read as this format whatever the file name says.
+    pub format: Option<CloudFormat>,
+    /// 3DTK `.3d` only: keep only returns with 20 cm <= range < 3270 cm (drops the near-sensor
+    /// echoes and the max-range sentinel; see the data README §1.3). Off by default: the file
+    /// is read as it is.
+    pub uos_valid_only: bool,
+}
+
+/// What a reader found in a file besides the points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadReport {
+    /// The format read.
+    pub format: CloudFormat,
+    /// The encoding within the format (`ascii`, `binary`, `binary_compressed`,
+    /// `binary_little_endian`, ...), empty where the format has one encoding.
+    pub encoding: String,
+    /// Point records in the file (before any point was dropped).
+    pub records: u64,
+    /// Points dropped because a coordinate was NaN or infinite.
+    pub dropped_non_finite: u64,
+    /// Points dropped by a validity filter asked for in [`ReadOptions`].
+    pub dropped_invalid: u64,
+    /// The per-point fields the file declares (`x`, `y`, `z`, `intensity`, ...).
+    pub fields: Vec<String>,
+    /// `(width, height)` of an organised cloud (PCD with `HEIGHT` > 1).
+    pub organized: Option<(u32, u32)>,
+    /// Unparseable lines skipped at the top of a text file (3DTK tolerates up to 10).
+    pub header_lines_skipped: usize,
+    /// The compression the file was wrapped in (`bzip2`), if any.
+    pub compression: Option<&'static str>,
+}
+
+impl ReadReport {
+    /// An empty report for a format.
+    pub fn new(format: CloudFormat) -> Self {
+        ReadReport {
+            format,
+            encoding: String::new(),
+            records: 0,
+            dropped_non_finite: 0,
+            dropped_invalid: 0,
+            fields: Vec::new(),
+            organized: None,
+            header_lines_skipped: 0,
+            compression: None,
+        }
+    }
+}
+
+/// A cloud read from a file, with the reader's report.
+#[derive(Debug, Clone)]
+pub struct LoadedCloud {
+    /// The points.
+    pub cloud: PointCloud,
+    /// What the reader found.
+    pub report: ReadReport,
+}
+
+/// Encodings of the PCD writer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PcdEncoding {
+    /// Human-readable text.
+    Ascii,
+    /// Packed little-endian records (PCL's default for `savePCDFileBinary`).
+    #[default]
+    Binary,
+    /// LZF-compressed structure-of-arrays.
+    BinaryCompressed,
+}
+
+/// Encodings of the PLY writer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PlyEncoding {
+    /// `binary_little_endian 1.0`.
+    #[default]
+    BinaryLittleEndian,
+    /// `ascii 1.0`.
+    Ascii,
+}
+
+/// Options for writing clouds.
+#[derive(Debug, Clone, Default)]
+pub struct WriteOptions {
+    /// Write this format whatever the file name says.
+    pub format: Option<CloudFormat>,
+    /// Encoding of PCD files.
+    pub pcd_encoding: PcdEncoding,
+    /// Encoding of PLY files.
+    pub ply_encoding: PlyEncoding,
+}
+
+/// Reads a point cloud, choosing the format from the file name (and content where needed).
+///
+/// ```no_run
+/// let loaded = olmap::io::read_cloud("scan000.3d")?;
+/// println!("{} points, {} dropped", loaded.cloud.len(), loaded.report.dropped_non_finite);
+/// # Ok::<(), olmap::Error>(())
+/// ```
+pub fn read_cloud(path: impl AsRef<Path>) -> Result<LoadedCloud> {
+    read_cloud_with(path, &ReadOptions::default())
+}
+
+/// Reads a point cloud with options.
+pub fn read_cloud_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedCloud> {
+    let path = path.as_ref();
+    let mut reader = open_buffered(path)?;
+    let compression = if has_extension(path, "bz2") || starts_with(&mut reader, path, b"BZh")? {
+        Some("bzip2")
+    } else {
+        None
+    };
+    let inner_name: PathBuf = if compression.is_some() && has_extension(path, "bz2") {
+        path.with_extension("")
+    } else {
+        path.to_path_buf()
+    };
+    let read_err = |format: CloudFormat, source: ParseError| Error::Read {
+        path: path.to_path_buf(),
+        format: format.name(),
+        source,
+    };
+    let mut loaded = match compression {
+        None => {
+            let format = match options.format {
+                Some(f) => f,
+                None => detect_format(&inner_name, &mut reader, path)?,
+            };
+            read_cloud_from(reader, format, options).map_err(|e| read_err(format, e))?
+        }
+        Some(_) => decompress_and_read(reader, &inner_name, path, options)?,
+    };
+    loaded.report.compression = compression;
+    Ok(loaded)
+}
+
+#[cfg(feature = "bzip2")]
+fn decompress_and_read(
+    reader: BufReader<File>,
+    inner_name: &Path,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<LoadedCloud> {
+    let mut inner = BufReader::with_capacity(1 << 18, bzip2::read::MultiBzDecoder::new(reader));
+    let format = match options.format {
+        Some(f) => f,
+        None => detect_format(inner_name, &mut inner, path)?,
+    };
+    read_cloud_from(inner, format, options).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        format: format.name(),
+        source,
+    })
+}
+
+#[cfg(not(feature = "bzip2"))]
+fn decompress_and_read(
+    _reader: BufReader<File>,
+    _inner_name: &Path,
+    path: &Path,
+    _options: &ReadOptions,
+) -> Result<LoadedCloud> {
+    Err(Error::UnknownFormat {
+        path: path.to_path_buf(),
+        reason: "bzip2-compressed, but olmap was built without the `bzip2` feature".into(),
+    })
+}
+
+/// Reads a cloud of a known format from a stream (no file name needed).
+///
+/// ```
+/// use olmap::io::{read_cloud_from, CloudFormat, ReadOptions};
+/// let text = b"# x y z\n1 2 3\n4 5 6\n";
+/// let loaded = read_cloud_from(&text[..], CloudFormat::Xyz, &ReadOptions::default()).unwrap();
+/// assert_eq!(loaded.cloud.len(), 2);
+/// ```
+pub fn read_cloud_from<R: BufRead>(
+    reader: R,
+    format: CloudFormat,
+    options: &ReadOptions,
+) -> Result<LoadedCloud, ParseError> {
+    match format {
+        CloudFormat::Pcd => pcd::read(reader),
+        CloudFormat::Ply => ply::read(reader),
+        CloudFormat::Xyz => xyz::read(reader),
+        CloudFormat::Uos => uos::read(reader, options.uos_valid_only),
+        CloudFormat::Csv => csv::read(reader),
+        CloudFormat::KittiBin => kitti::read(reader),
+        CloudFormat::ScanGraph => scan_graph::read(reader),
+    }
+}
+
+/// Writes a point cloud, choosing the format from the file name (or `options.format`).
+/// The file appears complete or not at all.
+pub fn write_cloud(
+    path: impl AsRef<Path>,
+    cloud: &PointCloud,
+    options: &WriteOptions,
+) -> Result<()> {
+    let path = path.as_ref();
+    let format = match options.format {
+        Some(f) => f,
+        None => {
+            let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+            CloudFormat::from_extension(ext).ok_or_else(|| Error::UnknownFormat {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "cannot tell the output format from the extension '{ext}'; known: {}",
+                    CloudFormat::list_extensions()
+                ),
+            })?
+        }
+    };
+    write_atomic(path, format.name(), |w| {
+        write_cloud_to(w, cloud, format, options)
+    })
+}
+
+/// Writes a cloud in a given format to a stream.
+pub fn write_cloud_to<W: Write>(
+    w: W,
+    cloud: &PointCloud,
+    format: CloudFormat,
+    options: &WriteOptions,
+) -> std::io::Result<()> {
+    match format {
+        CloudFormat::Pcd => pcd::write(w, cloud, options.pcd_encoding),
+        CloudFormat::Ply => ply::write(w, cloud, options.ply_encoding),
+        CloudFormat::Xyz => xyz::write(w, cloud),
+        CloudFormat::Uos => uos::write(w, cloud),
+        CloudFormat::Csv => csv::write(w, cloud),
+        CloudFormat::KittiBin => kitti::write(w, cloud),
+        CloudFormat::ScanGraph => scan_graph::write(w, cloud),
+    }
+}
+
+/// Tells the format of a file from its name, and from its first bytes where the name does
+/// not settle it.
+pub fn detect_format_of_path(path: impl AsRef<Path>) -> Result<CloudFormat> {
+    let path = path.as_ref();
+    let mut reader = open_buffered(path)?;
+    detect_format(path, &mut reader, path)
+}
+
+fn detect_format<R: BufRead>(name: &Path, reader: &mut R, path: &Path) -> Result<CloudFormat> {
+    let head = reader.fill_buf().map_err(|e| Error::io(path, e))?;
+    let head = &head[..head.len().min(64)];
+    // Signatures win over extensions: a PLY saved as .txt is still a PLY.
+    if head.starts_with(b"ply") && head.get(3).is_some_and(|c| *c == b'\n' || *c == b'\r') {
+        return Ok(CloudFormat::Ply);
+    }
+    let looks_pcd =
+        head.starts_with(b"# .PCD") || head.starts_with(b"VERSION") || head.starts_with(b"FIELDS");
+    let ext = name.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match CloudFormat::from_extension(ext) {
+        Some(CloudFormat::Xyz) | Some(CloudFormat::Csv) | None if looks_pcd => Ok(CloudFormat::Pcd),
+        Some(f) => Ok(f),
+        None => Err(Error::UnknownFormat {
+            path: path.to_path_buf(),
+            reason: if ext.is_empty() {
+                format!(
+                    "no extension and no known signature; known extensions: {} (optionally + .bz2)",
+                    CloudFormat::list_extensions()
+                )
+            } else {
+                format!(
+                    "extension '.{ext}' is not a known point-cloud format and the content has no known signature; known: {} (optionally + .bz2)",
+                    CloudFormat::list_extensions()
+                )
+            },
+        }),
+    }
+}
+
+fn has_extension(path: &Path, ext: &str) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+}
+
+fn starts_with<R: BufRead>(reader: &mut R, path: &Path, magic: &[u8]) -> Result<bool> {
+    let head = reader.fill_buf().map_err(|e| Error::io(path, e))?;
+    Ok(head.starts_with(magic))
+}
+
+/// Opens a file for buffered reading, with errors that name it (and a clear one for
+/// directories).
+pub fn open_buffered(path: &Path) -> Result<BufReader<File>> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.is_dir() {
+        return Err(Error::IsDirectory {
+            path: path.to_path_buf(),
+        });
+    }
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    Ok(BufReader::with_capacity(1 << 18, file))
+}
+
+/// Reads a whole file into memory, with errors that name it.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    let mut r = open_buffered(path)?;
+    let mut v = Vec::new();
+    r.read_to_end(&mut v).map_err(|e| Error::io(path, e))?;
+    Ok(v)
+}
+
+/// Writes a file atomically: `write` fills a temporary file beside `path`, which is renamed
+/// onto `path` only when everything succeeded; on failure the temporary file is removed and
+/// an existing `path` is left untouched.
+pub fn write_atomic(
+    path: &Path,
+    format: &'static str,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> Result<()> {
+    if path.is_dir() {
+        return Err(Error::IsDirectory {
+            path: path.to_path_buf(),
+        });
+    }
+    let file_name = path.file_name().ok_or_else(|| Error::Write {
+        path: path.to_path_buf(),
+        format,
+        reason: "the path has no file name".into(),
+    })?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(".olmap-tmp-{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    let file = File::create(&tmp).map_err(|e| Error::io(path, e))?;
+    let mut w = BufWriter::with_capacity(1 << 18, file);
+    let result = write(&mut w).and_then(|_| w.flush());
+    drop(w);
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::Write {
+            path: path.to_path_buf(),
+            format,
+            reason: e.to_string(),
+        });
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}
+
+/// Converts a point to single precision and keeps it if all three coordinates are finite
+/// (also after the conversion: 1e300 does not fit an f32), counting the ones dropped.
+#[inline]
+pub(crate) fn finite_point(p: [f64; 3], report: &mut ReadReport) -> Option<nalgebra::Point3<f32>> {
+    let q = nalgebra::Point3::new(p[0] as f32, p[1] as f32, p[2] as f32);
+    if q.x.is_finite() && q.y.is_finite() && q.z.is_finite() {
+        Some(q)
+    } else {
+        report.dropped_non_finite += 1;
+        None
+    }
+}
