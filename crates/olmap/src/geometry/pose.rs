@@ -120,8 +120,12 @@ impl Pose {
                 r.determinant()
             )));
         }
-        // Nearest rotation in the Frobenius sense.
-        let rot = Rotation3::from_matrix_eps(r, 1e-12, 100, Rotation3::identity());
+        // Nearest rotation in the Frobenius sense (polar decomposition by SVD).
+        let svd = r.svd(true, true);
+        let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
+        let mut d = Matrix3::identity();
+        d[(2, 2)] = (u * v_t).determinant().signum();
+        let rot = Rotation3::from_matrix_unchecked(u * d * v_t);
         Ok(Self::from_rotation_translation(&rot, t))
     }
 

@@ -1,15 +1,198 @@
-//! TODO
-use super::LoadedCloud;
-use crate::cloud::PointCloud;
-use crate::error::ParseError;
+//! OctoMap's binary ScanGraph (`.graph`): a pose graph whose nodes carry 3D scans.
+//!
+//! Layout (`ScanGraph::writeBinary`, little-endian as written on x86):
+//! ```text
+//! u32 n_nodes; n_nodes x { Pointcloud; Pose6D; u32 id }
+//! u32 n_edges; n_edges x { u32 first; u32 second; Pose6D constraint; f64 weight }
+//! Pointcloud = u32 n_points; n_points x Vector3
+//! Vector3    = i32 (= 3); f64 x; f64 y; f64 z
+//! Pose6D     = Vector3 translation; Quaternion
+//! Quaternion = i32 (= 4); f64 w; f64 x; f64 y; f64 z
+//! ```
+//! A node's points are in its sensor frame and its pose is `T_world_node`. [`read`] returns
+//! all scans in the world frame, concatenated (sensor origin: the first node's position);
+//! [`read_nodes`] keeps them apart. Edges are checked for completeness and ignored.
+
 use std::io::{BufRead, Write};
 
-/// Reads.
-pub fn read<R: BufRead>(_reader: R) -> Result<LoadedCloud, ParseError> {
-    Err(ParseError::Unsupported("not yet".into()))
+use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
+
+use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
+use crate::cloud::PointCloud;
+use crate::error::{Location, ParseError};
+use crate::geometry::Pose;
+
+/// One node of a ScanGraph: a scan in its sensor frame and the sensor's pose.
+#[derive(Debug, Clone)]
+pub struct ScanNode {
+    /// The node id stored in the file.
+    pub id: u32,
+    /// `T_world_node`.
+    pub pose: Pose,
+    /// The scan, in the node's sensor frame.
+    pub cloud: PointCloud,
 }
 
-/// Writes.
-pub fn write<W: Write>(_w: W, _cloud: &PointCloud) -> std::io::Result<()> {
-    Err(std::io::Error::other("not yet"))
+struct Cursor<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], ParseError> {
+        if self.data.len() - self.pos < n {
+            return Err(ParseError::Truncated(format!(
+                "{what} at byte {} needs {n} bytes, only {} left",
+                self.pos,
+                self.data.len() - self.pos
+            )));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, ParseError> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, ParseError> {
+        let b = self.take(8, what)?;
+        Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+    fn tagged(&mut self, tag: u32, n: usize, what: &str) -> Result<[f64; 4], ParseError> {
+        let at = self.pos as u64;
+        let t = self.u32(what)?;
+        if t != tag {
+            return Err(ParseError::at(
+                Location::Byte(at),
+                format!("{what}: expected the size tag {tag}, found {t}"),
+            ));
+        }
+        let mut v = [0.0; 4];
+        for x in v.iter_mut().take(n) {
+            *x = self.f64(what)?;
+        }
+        Ok(v)
+    }
+    fn pose(&mut self) -> Result<Pose, ParseError> {
+        let at = self.pos as u64;
+        let t = self.tagged(3, 3, "pose translation")?;
+        let q = self.tagged(4, 4, "pose quaternion")?;
+        let quat = Quaternion::new(q[0], q[1], q[2], q[3]);
+        let norm = quat.norm();
+        if !(norm.is_finite() && (norm - 1.0).abs() < 1e-3) || t.iter().any(|v| !v.is_finite()) {
+            return Err(ParseError::at(
+                Location::Byte(at),
+                format!("pose is not a rigid transform (quaternion norm {norm})"),
+            ));
+        }
+        Ok(Pose::from_parts(Vector3::new(t[0], t[1], t[2]), UnitQuaternion::from_quaternion(quat)))
+    }
+}
+
+/// Reads every node of a ScanGraph, scans in their sensor frames.
+pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadReport), ParseError> {
+    let mut data = Vec::new();
+    reader.read_to_end(&mut data)?;
+    if data.is_empty() {
+        return Err(ParseError::Empty);
+    }
+    let mut report = ReadReport::new(CloudFormat::ScanGraph);
+    report.fields = vec!["x".into(), "y".into(), "z".into()];
+    let mut c = Cursor { data: &data, pos: 0 };
+    let n_nodes = c.u32("node count")?;
+    let mut nodes = Vec::new();
+    for node in 0..n_nodes {
+        let n_points = c.u32("point count")? as usize;
+        // 28 bytes per point: refuse counts the file cannot hold before allocating.
+        if n_points.saturating_mul(28) > data.len() - c.pos {
+            return Err(ParseError::Truncated(format!(
+                "node {node} announces {n_points} points but only {} bytes are left",
+                data.len() - c.pos
+            )));
+        }
+        let mut points = Vec::with_capacity(n_points);
+        for _ in 0..n_points {
+            let v = c.tagged(3, 3, "point")?;
+            report.records += 1;
+            if let Some(p) = finite_point([v[0], v[1], v[2]], &mut report) {
+                points.push(p);
+            }
+        }
+        let pose = c.pose()?;
+        let id = c.u32("node id")?;
+        nodes.push(ScanNode {
+            id,
+            pose,
+            cloud: PointCloud::from_points(points),
+        });
+    }
+    let n_edges = c.u32("edge count")? as usize;
+    // 4 + 4 + 60 (pose) + 8 bytes per edge.
+    if n_edges.saturating_mul(76) > data.len() - c.pos {
+        return Err(ParseError::Truncated(format!("{n_edges} edges announced, not enough bytes left")));
+    }
+    for _ in 0..n_edges {
+        c.u32("edge first id")?;
+        c.u32("edge second id")?;
+        c.pose()?;
+        c.f64("edge weight")?;
+    }
+    Ok((nodes, report))
+}
+
+/// Reads a ScanGraph as one cloud in the world frame.
+pub fn read<R: BufRead>(reader: R) -> Result<LoadedCloud, ParseError> {
+    let (nodes, report) = read_nodes(reader)?;
+    let world: Vec<PointCloud> = nodes.iter().map(|n| n.cloud.transformed(&n.pose)).collect();
+    let mut cloud = PointCloud::concatenate(&world);
+    if let Some(first) = nodes.first() {
+        cloud.set_origin(Point3::from(first.pose.translation()));
+    }
+    Ok(LoadedCloud { cloud, report })
+}
+
+/// Writes a cloud as a one-node ScanGraph: the node sits at the cloud's sensor origin with
+/// identity rotation, and holds the points relative to it.
+pub fn write<W: Write>(mut w: W, cloud: &PointCloud) -> std::io::Result<()> {
+    let o = cloud.origin();
+    let mut out = Vec::with_capacity(8 + cloud.len() * 28 + 80);
+    let vec3 = |out: &mut Vec<u8>, v: [f64; 3]| {
+        out.extend_from_slice(&3i32.to_le_bytes());
+        for x in v {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+    };
+    out.extend_from_slice(&1u32.to_le_bytes());
+    let n = u32::try_from(cloud.len()).map_err(|_| std::io::Error::other("more than 2^32 points"))?;
+    out.extend_from_slice(&n.to_le_bytes());
+    for p in cloud.points() {
+        vec3(&mut out, [p.x as f64 - o.x, p.y as f64 - o.y, p.z as f64 - o.z]);
+    }
+    vec3(&mut out, [o.x, o.y, o.z]);
+    out.extend_from_slice(&4i32.to_le_bytes());
+    for x in [1.0f64, 0.0, 0.0, 0.0] {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    out.extend_from_slice(&0u32.to_le_bytes()); // node id
+    out.extend_from_slice(&0u32.to_le_bytes()); // no edges
+    w.write_all(&out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_truncation() {
+        let c = PointCloud::from_points(vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.5, 0.0, 0.25)])
+            .with_origin(Point3::new(1.0, 0.0, -0.5));
+        let mut buf = Vec::new();
+        write(&mut buf, &c).unwrap();
+        let back = read(&buf[..]).unwrap().cloud;
+        assert_eq!(back, c);
+        for cut in [0, 3, 10, buf.len() - 1] {
+            assert!(read(&buf[..cut]).is_err(), "cut at {cut}");
+        }
+    }
 }

@@ -53,10 +53,3 @@ pub(crate) fn is_blank_or_comment(line: &str) -> bool {
     let t = line.trim_start();
     t.is_empty() || t.starts_with('#')
 }
-
-/// Formats a float so that parsing it back gives the same value (shortest round-trip form).
-#[inline]
-pub(crate) fn push_f32(out: &mut String, v: f32) {
-    use std::fmt::Write;
-    let _ = write!(out, "{v}");
-}
