@@ -39,5 +39,6 @@ pub mod cloud;
 pub mod error;
 pub mod geometry;
 pub mod io;
+pub mod test_data;
 
 pub use error::{Error, ParseError, Result};

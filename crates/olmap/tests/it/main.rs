@@ -1,1 +1,13 @@
-mod x {}
+//! Integration tests of the olmap library (one binary: it links once).
+
+mod bad_input;
+mod fuzz;
+mod real_data;
+mod round_trip;
+
+use std::path::PathBuf;
+
+/// The shared data folder, or `None` to skip (see `olmap::test_data`).
+pub fn data() -> Option<PathBuf> {
+    olmap::test_data::dir()
+}

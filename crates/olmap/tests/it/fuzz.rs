@@ -1,0 +1,79 @@
+//! Property tests: random and mutated bytes fed to every reader never panic.
+
+use olmap::io::{self, CloudFormat, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions};
+use proptest::prelude::*;
+
+use crate::round_trip::synthetic_cloud;
+
+fn samples() -> Vec<(CloudFormat, Vec<u8>)> {
+    let cloud = synthetic_cloud(20);
+    let mut out = Vec::new();
+    let mut push = |format, opts: WriteOptions| {
+        let mut buf = Vec::new();
+        io::write_cloud_to(&mut buf, &cloud, format, &opts).unwrap();
+        out.push((format, buf));
+    };
+    for format in CloudFormat::ALL {
+        push(format, WriteOptions::default());
+    }
+    for pcd_encoding in [PcdEncoding::Ascii, PcdEncoding::BinaryCompressed] {
+        push(CloudFormat::Pcd, WriteOptions { pcd_encoding, ..Default::default() });
+    }
+    push(CloudFormat::Ply, WriteOptions { ply_encoding: PlyEncoding::Ascii, ..Default::default() });
+    out
+}
+
+#[derive(Debug, Clone)]
+enum Mutation {
+    Flip(usize, u8),
+    Insert(usize, u8),
+    Delete(usize),
+    Truncate(usize),
+    Digit(usize, u8),
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    prop_oneof![
+        (any::<usize>(), 1u8..=255).prop_map(|(i, b)| Mutation::Flip(i, b)),
+        (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Mutation::Insert(i, b)),
+        any::<usize>().prop_map(Mutation::Delete),
+        any::<usize>().prop_map(Mutation::Truncate),
+        (any::<usize>(), b'0'..=b'9').prop_map(|(i, b)| Mutation::Digit(i, b)),
+    ]
+}
+
+fn apply(bytes: &mut Vec<u8>, m: &Mutation) {
+    if bytes.is_empty() {
+        return;
+    }
+    let n = bytes.len();
+    match *m {
+        Mutation::Flip(i, b) => bytes[i % n] ^= b,
+        Mutation::Insert(i, b) => bytes.insert(i % (n + 1), b),
+        Mutation::Delete(i) => {
+            bytes.remove(i % n);
+        }
+        Mutation::Truncate(i) => bytes.truncate(i % n),
+        Mutation::Digit(i, b) => bytes[i % n] = b,
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2048), which in 0usize..7) {
+        let format = CloudFormat::ALL[which];
+        let _ = io::read_cloud_from(&bytes[..], format, &ReadOptions::default());
+    }
+
+    #[test]
+    fn mutated_files_never_panic(which in 0usize..10, muts in proptest::collection::vec(mutation(), 1..6)) {
+        let samples = samples();
+        let (format, mut bytes) = samples[which % samples.len()].clone();
+        for m in &muts {
+            apply(&mut bytes, m);
+        }
+        let _ = io::read_cloud_from(&bytes[..], format, &ReadOptions { uos_valid_only: true, ..Default::default() });
+    }
+}
