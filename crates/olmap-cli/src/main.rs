@@ -1,1 +1,51 @@
-fn main() {}
+//! `olmap`: the command-line program of the olmap toolkit.
+//!
+//! Every command has `--help`; commands that compute something have `--json` for scripts.
+//! Errors are printed as one line naming the file and the reason, with a non-zero exit
+//! status (1 for a failure, 2 for a bad command line).
+
+mod commands;
+mod report;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// olmap: 3D mapping and localisation for one or many mobile robots.
+///
+/// Reads the scan formats robots produce (PCD, PLY, XYZ text, 3DTK .3d/.pose/.frames, CSV,
+/// KITTI .bin, OctoMap ScanGraph; any of them .bz2-compressed), converts and filters them.
+/// Units are metres and degrees on the command line; frames are right-handed, x forward,
+/// y left, z up.
+#[derive(Parser)]
+#[command(name = "olmap", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Describe point-cloud files: format, points, bounding box, ranges, dropped points.
+    Info(commands::info::InfoArgs),
+    /// Convert a point cloud between formats, optionally filtering and transforming it.
+    Convert(commands::convert::ConvertArgs),
+    /// Run the built-in demonstration on generated data (no download needed).
+    Demo(commands::demo::DemoArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info(a) => commands::info::run(&a),
+        Command::Convert(a) => commands::convert::run(&a),
+        Command::Demo(a) => commands::demo::run(&a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -49,9 +49,19 @@ impl Columns {
             _ => None,
         };
         let xyz = triple(&["x"], &["y"], &["z"]).ok_or_else(|| {
-            ParseError::line(line_no, format!("header has no x, y and z columns (found: {})", names.join(", ")))
+            ParseError::line(
+                line_no,
+                format!(
+                    "header has no x, y and z columns (found: {})",
+                    names.join(", ")
+                ),
+            )
         })?;
-        let normal = triple(&["nx", "normal_x"], &["ny", "normal_y"], &["nz", "normal_z"]);
+        let normal = triple(
+            &["nx", "normal_x"],
+            &["ny", "normal_y"],
+            &["nz", "normal_z"],
+        );
         let intensity = find(&["intensity", "reflectance", "i"]);
         let color = triple(&["red", "r"], &["green", "g"], &["blue", "b"]);
         let needed = xyz
@@ -89,7 +99,10 @@ pub fn read<R: BufRead>(reader: R) -> Result<LoadedCloud, ParseError> {
                 let tokens: Vec<&str> = fields(line).collect();
                 let is_header = tokens.iter().any(|t| parse_f64(t.as_bytes()).is_none());
                 let c = if is_header {
-                    let names: Vec<String> = tokens.iter().map(|t| t.trim().to_ascii_lowercase()).collect();
+                    let names: Vec<String> = tokens
+                        .iter()
+                        .map(|t| t.trim().to_ascii_lowercase())
+                        .collect();
                     let c = Columns::from_header(&names, line_no)?;
                     report.fields = names;
                     c
@@ -97,7 +110,12 @@ pub fn read<R: BufRead>(reader: R) -> Result<LoadedCloud, ParseError> {
                     report.fields = vec!["x".into(), "y".into(), "z".into()];
                     Columns::positional()
                 };
-                report.encoding = if line.contains(',') { "comma-separated" } else { "whitespace-separated" }.into();
+                report.encoding = if line.contains(',') {
+                    "comma-separated"
+                } else {
+                    "whitespace-separated"
+                }
+                .into();
                 let header = is_header;
                 // Set up attributes before the first point.
                 if c.intensity.is_some() {
@@ -122,14 +140,21 @@ pub fn read<R: BufRead>(reader: R) -> Result<LoadedCloud, ParseError> {
                 break;
             }
             let v = parse_f64(t.as_bytes()).ok_or_else(|| {
-                ParseError::line(line_no, format!("column {} is not a number: '{}'", i + 1, truncate(t, 30)))
+                ParseError::line(
+                    line_no,
+                    format!("column {} is not a number: '{}'", i + 1, truncate(t, 30)),
+                )
             })?;
             values.push(v);
         }
         if values.len() < cols.needed {
             return Err(ParseError::line(
                 line_no,
-                format!("expected at least {} columns, found {}", cols.needed, values.len()),
+                format!(
+                    "expected at least {} columns, found {}",
+                    cols.needed,
+                    values.len()
+                ),
             ));
         }
         report.records += 1;
@@ -201,7 +226,12 @@ pub fn read_pose_table<R: BufRead>(reader: R) -> Result<PoseList, ParseError> {
             return Ok(());
         }
         let tokens: Vec<&str> = line.split(',').map(str::trim).collect();
-        if !seen_header && tokens.iter().skip(1).any(|t| parse_f64(t.as_bytes()).is_none()) {
+        if !seen_header
+            && tokens
+                .iter()
+                .skip(1)
+                .any(|t| parse_f64(t.as_bytes()).is_none())
+        {
             seen_header = true;
             return Ok(());
         }
@@ -209,17 +239,24 @@ pub fn read_pose_table<R: BufRead>(reader: R) -> Result<PoseList, ParseError> {
         if tokens.len() < 17 {
             return Err(ParseError::line(
                 line_no,
-                format!("expected a name and 16 matrix elements, found {} fields", tokens.len()),
+                format!(
+                    "expected a name and 16 matrix elements, found {} fields",
+                    tokens.len()
+                ),
             ));
         }
         let mut m = Matrix4::zeros();
         for (i, t) in tokens[1..17].iter().enumerate() {
             m[(i / 4, i % 4)] = parse_f64(t.as_bytes()).ok_or_else(|| {
-                ParseError::line(line_no, format!("matrix element {} is not a number: '{t}'", i + 1))
+                ParseError::line(
+                    line_no,
+                    format!("matrix element {} is not a number: '{t}'", i + 1),
+                )
             })?;
         }
-        let pose = Pose::from_matrix4(&m, crate::geometry::pose_file::ROTATION_TOLERANCE)
-            .map_err(|e| ParseError::line(line_no, e.to_string().replace("invalid argument: ", "")))?;
+        let pose = Pose::from_matrix4(&m, crate::geometry::pose_file::ROTATION_TOLERANCE).map_err(
+            |e| ParseError::line(line_no, e.to_string().replace("invalid argument: ", "")),
+        )?;
         list.push(tokens[0], pose);
         Ok(())
     })?;
@@ -280,7 +317,8 @@ mod tests {
     #[test]
     fn round_trip_with_attributes() {
         let mut c = PointCloud::from_points(vec![nalgebra::Point3::new(0.1, -2.5, 3.25)]);
-        c.set_normals(Some(vec![Vector3::new(0.0, 0.6, 0.8)])).unwrap();
+        c.set_normals(Some(vec![Vector3::new(0.0, 0.6, 0.8)]))
+            .unwrap();
         c.set_intensity(Some(vec![12.5])).unwrap();
         c.set_colors(Some(vec![[1, 2, 255]])).unwrap();
         let mut buf = Vec::new();
@@ -301,7 +339,10 @@ mod tests {
     fn pose_table_round_trip() {
         let mut list = PoseList::default();
         list.push("a.csv", Pose::identity());
-        list.push("b.csv", Pose::from_xyz_ypr(0.06, 0.19, -0.03, -0.15, -0.11, -0.16));
+        list.push(
+            "b.csv",
+            Pose::from_xyz_ypr(0.06, 0.19, -0.03, -0.15, -0.11, -0.16),
+        );
         let mut buf = Vec::new();
         write_pose_table(&mut buf, &list).unwrap();
         let back = read_pose_table(&buf[..]).unwrap();

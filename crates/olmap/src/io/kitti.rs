@@ -77,7 +77,10 @@ mod tests {
 
     #[test]
     fn round_trip_and_truncation() {
-        let mut c = PointCloud::from_points(vec![Point3::new(1.5, -2.0, 0.25), Point3::new(f32::MAX, 0.0, -1e-30)]);
+        let mut c = PointCloud::from_points(vec![
+            Point3::new(1.5, -2.0, 0.25),
+            Point3::new(f32::MAX, 0.0, -1e-30),
+        ]);
         c.set_intensity(Some(vec![0.5, 1.0])).unwrap();
         let mut buf = Vec::new();
         write(&mut buf, &c).unwrap();

@@ -86,7 +86,10 @@ impl<'a> Cursor<'a> {
                 format!("pose is not a rigid transform (quaternion norm {norm})"),
             ));
         }
-        Ok(Pose::from_parts(Vector3::new(t[0], t[1], t[2]), UnitQuaternion::from_quaternion(quat)))
+        Ok(Pose::from_parts(
+            Vector3::new(t[0], t[1], t[2]),
+            UnitQuaternion::from_quaternion(quat),
+        ))
     }
 }
 
@@ -99,7 +102,10 @@ pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadRepor
     }
     let mut report = ReadReport::new(CloudFormat::ScanGraph);
     report.fields = vec!["x".into(), "y".into(), "z".into()];
-    let mut c = Cursor { data: &data, pos: 0 };
+    let mut c = Cursor {
+        data: &data,
+        pos: 0,
+    };
     let n_nodes = c.u32("node count")?;
     let mut nodes = Vec::new();
     for node in 0..n_nodes {
@@ -130,7 +136,9 @@ pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadRepor
     let n_edges = c.u32("edge count")? as usize;
     // 4 + 4 + 60 (pose) + 8 bytes per edge.
     if n_edges.saturating_mul(76) > data.len() - c.pos {
-        return Err(ParseError::Truncated(format!("{n_edges} edges announced, not enough bytes left")));
+        return Err(ParseError::Truncated(format!(
+            "{n_edges} edges announced, not enough bytes left"
+        )));
     }
     for _ in 0..n_edges {
         c.u32("edge first id")?;
@@ -164,10 +172,14 @@ pub fn write<W: Write>(mut w: W, cloud: &PointCloud) -> std::io::Result<()> {
         }
     };
     out.extend_from_slice(&1u32.to_le_bytes());
-    let n = u32::try_from(cloud.len()).map_err(|_| std::io::Error::other("more than 2^32 points"))?;
+    let n =
+        u32::try_from(cloud.len()).map_err(|_| std::io::Error::other("more than 2^32 points"))?;
     out.extend_from_slice(&n.to_le_bytes());
     for p in cloud.points() {
-        vec3(&mut out, [p.x as f64 - o.x, p.y as f64 - o.y, p.z as f64 - o.z]);
+        vec3(
+            &mut out,
+            [p.x as f64 - o.x, p.y as f64 - o.y, p.z as f64 - o.z],
+        );
     }
     vec3(&mut out, [o.x, o.y, o.z]);
     out.extend_from_slice(&4i32.to_le_bytes());
@@ -185,8 +197,11 @@ mod tests {
 
     #[test]
     fn round_trip_and_truncation() {
-        let c = PointCloud::from_points(vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.5, 0.0, 0.25)])
-            .with_origin(Point3::new(1.0, 0.0, -0.5));
+        let c = PointCloud::from_points(vec![
+            Point3::new(1.0, 2.0, 3.0),
+            Point3::new(-4.5, 0.0, 0.25),
+        ])
+        .with_origin(Point3::new(1.0, 0.0, -0.5));
         let mut buf = Vec::new();
         write(&mut buf, &c).unwrap();
         let back = read(&buf[..]).unwrap().cloud;

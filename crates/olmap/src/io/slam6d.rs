@@ -79,7 +79,8 @@ pub struct Frame {
 fn parse_numbers(line: &str, line_no: usize) -> Result<Vec<f64>, ParseError> {
     line.split_whitespace()
         .map(|t| {
-            parse_f64(t.as_bytes()).ok_or_else(|| ParseError::line(line_no, format!("'{t}' is not a number")))
+            parse_f64(t.as_bytes())
+                .ok_or_else(|| ParseError::line(line_no, format!("'{t}' is not a number")))
         })
         .collect()
 }
@@ -112,10 +113,15 @@ pub fn read_pose<R: BufRead>(reader: R) -> Result<Pose, ParseError> {
             values.len()
         )));
     }
-    let r = rotation_3dtk(values[3].to_radians(), values[4].to_radians(), values[5].to_radians());
+    let r = rotation_3dtk(
+        values[3].to_radians(),
+        values[4].to_radians(),
+        values[5].to_radians(),
+    );
     let mut m = Matrix4::identity();
     m.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
-    m.fixed_view_mut::<3, 1>(0, 3).copy_from(&Vector3::new(values[0], values[1], values[2]));
+    m.fixed_view_mut::<3, 1>(0, 3)
+        .copy_from(&Vector3::new(values[0], values[1], values[2]));
     pose_rh_m_from_3dtk_cm(&m, TOLERANCE).map_err(|e| ParseError::Malformed(e.to_string()))
 }
 
@@ -128,7 +134,13 @@ pub fn write_pose<W: Write>(mut w: W, pose: &Pose) -> std::io::Result<()> {
     let a = (-m[(1, 2)]).atan2(m[(2, 2)]);
     let c = (-m[(0, 1)]).atan2(m[(0, 0)]);
     writeln!(w, "{} {} {}", m[(0, 3)], m[(1, 3)], m[(2, 3)])?;
-    writeln!(w, "{} {} {}", a.to_degrees(), b.to_degrees(), c.to_degrees())
+    writeln!(
+        w,
+        "{} {} {}",
+        a.to_degrees(),
+        b.to_degrees(),
+        c.to_degrees()
+    )
 }
 
 fn legacy_color_code(rgba: &[f64]) -> Option<AlgoType> {
@@ -158,7 +170,10 @@ pub fn read_frames<R: BufRead>(reader: R) -> Result<Vec<Frame>, ParseError> {
             if v.len() != 4 {
                 return Err(ParseError::line(
                     line_no,
-                    format!("legacy .frames: expected an RGBA colour line (4 numbers), found {}", v.len()),
+                    format!(
+                        "legacy .frames: expected an RGBA colour line (4 numbers), found {}",
+                        v.len()
+                    ),
                 ));
             }
             frames.push(Frame {
@@ -170,12 +185,16 @@ pub fn read_frames<R: BufRead>(reader: R) -> Result<Vec<Frame>, ParseError> {
         if v.len() != 16 && v.len() != 17 {
             return Err(ParseError::line(
                 line_no,
-                format!("expected 16 matrix elements (column-major) and a type code, found {} numbers", v.len()),
+                format!(
+                    "expected 16 matrix elements (column-major) and a type code, found {} numbers",
+                    v.len()
+                ),
             ));
         }
         let m = Matrix4::from_column_slice(&v[..16]);
-        let pose = pose_rh_m_from_3dtk_cm(&m, TOLERANCE)
-            .map_err(|e| ParseError::line(line_no, e.to_string().replace("invalid argument: ", "")))?;
+        let pose = pose_rh_m_from_3dtk_cm(&m, TOLERANCE).map_err(|e| {
+            ParseError::line(line_no, e.to_string().replace("invalid argument: ", ""))
+        })?;
         if v.len() == 17 {
             frames.push(Frame {
                 pose,
@@ -190,7 +209,10 @@ pub fn read_frames<R: BufRead>(reader: R) -> Result<Vec<Frame>, ParseError> {
         return Err(ParseError::Empty);
     }
     if let Some((line_no, _)) = pending {
-        return Err(ParseError::line(line_no, "legacy .frames: the last matrix has no colour line"));
+        return Err(ParseError::line(
+            line_no,
+            "legacy .frames: the last matrix has no colour line",
+        ));
     }
     if frames.is_empty() {
         return Err(ParseError::Malformed("no frame found".into()));
@@ -233,7 +255,10 @@ pub fn read_frames_path(path: impl AsRef<Path>) -> Result<Vec<Frame>> {
 
 /// The final registered pose of a `.frames` file (its last frame).
 pub fn read_final_frame_path(path: impl AsRef<Path>) -> Result<Pose> {
-    Ok(read_frames_path(path)?.last().expect("read_frames returns at least one frame").pose)
+    Ok(read_frames_path(path)?
+        .last()
+        .expect("read_frames returns at least one frame")
+        .pose)
 }
 
 #[cfg(test)]
@@ -252,15 +277,26 @@ mod tests {
     #[test]
     fn frames_round_trip_and_legacy() {
         let frames = vec![
-            Frame { pose: Pose::identity(), algo: Some(AlgoType::IcpInactive) },
-            Frame { pose: Pose::from_xyz_ypr(1.5, 0.03, -0.09, 0.01, 0.01, 0.004), algo: Some(AlgoType::Icp) },
+            Frame {
+                pose: Pose::identity(),
+                algo: Some(AlgoType::IcpInactive),
+            },
+            Frame {
+                pose: Pose::from_xyz_ypr(1.5, 0.03, -0.09, 0.01, 0.01, 0.004),
+                algo: Some(AlgoType::Icp),
+            },
         ];
         let mut buf = Vec::new();
         write_frames(&mut buf, &frames).unwrap();
         let back = read_frames(&buf[..]).unwrap();
         assert_eq!(back.len(), 2);
         assert_eq!(back[1].algo, Some(AlgoType::Icp));
-        assert!((back[1].pose.to_matrix4() - frames[1].pose.to_matrix4()).abs().max() < 1e-12);
+        assert!(
+            (back[1].pose.to_matrix4() - frames[1].pose.to_matrix4())
+                .abs()
+                .max()
+                < 1e-12
+        );
         let legacy = "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 \n0 0 1 1\n1 0 0 0 0 1 0 0 0 0 1 0 100 0 0 1 \n1 0 0 1\n";
         let back = read_frames(legacy.as_bytes()).unwrap();
         assert_eq!(back[0].algo, Some(AlgoType::Icp));

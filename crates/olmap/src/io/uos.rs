@@ -78,7 +78,10 @@ mod tests {
 
     #[test]
     fn round_trip() {
-        let cloud = PointCloud::from_points(vec![Point3::new(1.25, -0.5, 2.0), Point3::new(-3.1, 0.01, 0.7)]);
+        let cloud = PointCloud::from_points(vec![
+            Point3::new(1.25, -0.5, 2.0),
+            Point3::new(-3.1, 0.01, 0.7),
+        ]);
         let mut buf = Vec::new();
         write(&mut buf, &cloud).unwrap();
         let back = read(&buf[..], false).unwrap().cloud;

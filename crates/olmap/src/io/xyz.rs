@@ -75,7 +75,9 @@ pub(crate) fn read_with<R: BufRead>(
         return Err(ParseError::Empty);
     }
     if !started {
-        return Err(ParseError::Malformed("no point found (no line starts with three numbers)".into()));
+        return Err(ParseError::Malformed(
+            "no point found (no line starts with three numbers)".into(),
+        ));
     }
     Ok(LoadedCloud {
         cloud: PointCloud::from_points(points),

@@ -13,7 +13,13 @@ fn write(dir: &std::path::Path, name: &str, bytes: &[u8]) -> std::path::PathBuf 
 
 fn valid_bytes(format: CloudFormat) -> Vec<u8> {
     let mut buf = Vec::new();
-    io::write_cloud_to(&mut buf, &synthetic_cloud(50), format, &WriteOptions::default()).unwrap();
+    io::write_cloud_to(
+        &mut buf,
+        &synthetic_cloud(50),
+        format,
+        &WriteOptions::default(),
+    )
+    .unwrap();
     buf
 }
 
@@ -32,7 +38,12 @@ fn empty_files_are_refused_with_their_name() {
 #[test]
 fn truncated_files_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    for format in [CloudFormat::Pcd, CloudFormat::Ply, CloudFormat::KittiBin, CloudFormat::ScanGraph] {
+    for format in [
+        CloudFormat::Pcd,
+        CloudFormat::Ply,
+        CloudFormat::KittiBin,
+        CloudFormat::ScanGraph,
+    ] {
         let bytes = valid_bytes(format);
         let name = format!("cut.{}", format.extensions()[0]);
         let p = write(dir.path(), &name, &bytes[..bytes.len() - 7]);
@@ -48,15 +59,24 @@ fn headers_that_lie_about_counts() {
     let pcd = String::from_utf8_lossy(&valid_bytes(CloudFormat::Pcd)).into_owned();
     // Binary PCD claiming many more points than it holds.
     let bytes = valid_bytes(CloudFormat::Pcd);
-    let text_end = bytes.windows(12).position(|w| w == b"DATA binary\n").unwrap();
-    let header = String::from_utf8_lossy(&bytes[..text_end]).replace("POINTS 50", "POINTS 5000000").replace("WIDTH 50", "WIDTH 5000000");
+    let text_end = bytes
+        .windows(12)
+        .position(|w| w == b"DATA binary\n")
+        .unwrap();
+    let header = String::from_utf8_lossy(&bytes[..text_end])
+        .replace("POINTS 50", "POINTS 5000000")
+        .replace("WIDTH 50", "WIDTH 5000000");
     let mut lying = header.into_bytes();
     lying.extend_from_slice(&bytes[text_end..]);
     let p = write(dir.path(), "lying.pcd", &lying);
     let err = io::read_cloud(&p).unwrap_err();
     assert!(err.to_string().contains("lying.pcd"), "{err}");
     // WIDTH x HEIGHT disagreeing with POINTS.
-    let p = write(dir.path(), "dims.pcd", pcd.replacen("HEIGHT 1", "HEIGHT 2", 1).as_bytes());
+    let p = write(
+        dir.path(),
+        "dims.pcd",
+        pcd.replacen("HEIGHT 1", "HEIGHT 2", 1).as_bytes(),
+    );
     assert!(io::read_cloud(&p).is_err());
     // PLY announcing more vertices than present.
     let ply = valid_bytes(CloudFormat::Ply);
@@ -75,7 +95,9 @@ fn wrong_field_types_and_garbage() {
     let ply = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nproperty float y\nproperty float z\nend_header\n1 2 3\n";
     let p = write(dir.path(), "type.ply", ply.as_bytes());
     assert!(io::read_cloud(&p).is_err());
-    let garbage: Vec<u8> = (0..4096u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+    let garbage: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
     for format in CloudFormat::ALL {
         let name = format!("garbage.{}", format.extensions()[0]);
         let p = write(dir.path(), &name, &garbage);
@@ -95,16 +117,27 @@ fn directories_unknown_extensions_and_missing_files() {
     let dir = tempfile::tempdir().unwrap();
     let sub = dir.path().join("folder.pcd");
     std::fs::create_dir(&sub).unwrap();
-    assert!(matches!(io::read_cloud(&sub), Err(Error::IsDirectory { .. })));
+    assert!(matches!(
+        io::read_cloud(&sub),
+        Err(Error::IsDirectory { .. })
+    ));
     let p = write(dir.path(), "cloud.foo", b"1 2 3\n");
     let err = io::read_cloud(&p).unwrap_err();
     assert!(matches!(err, Error::UnknownFormat { .. }), "{err:?}");
-    assert!(err.to_string().contains("cloud.foo") && err.to_string().contains(".pcd"), "{err}");
+    assert!(
+        err.to_string().contains("cloud.foo") && err.to_string().contains(".pcd"),
+        "{err}"
+    );
     // A PLY under an unknown name is recognised by its signature.
     let p = write(dir.path(), "cloud.foo2", &valid_bytes(CloudFormat::Ply));
     assert_eq!(io::read_cloud(&p).unwrap().report.format, CloudFormat::Ply);
     let err = io::read_cloud(dir.path().join("absent.pcd")).unwrap_err();
     assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("absent.pcd"));
-    let err = io::write_cloud(dir.path().join("out.foo"), &synthetic_cloud(2), &WriteOptions::default()).unwrap_err();
+    let err = io::write_cloud(
+        dir.path().join("out.foo"),
+        &synthetic_cloud(2),
+        &WriteOptions::default(),
+    )
+    .unwrap_err();
     assert!(matches!(err, Error::UnknownFormat { .. }));
 }

@@ -17,9 +17,21 @@ fn samples() -> Vec<(CloudFormat, Vec<u8>)> {
         push(format, WriteOptions::default());
     }
     for pcd_encoding in [PcdEncoding::Ascii, PcdEncoding::BinaryCompressed] {
-        push(CloudFormat::Pcd, WriteOptions { pcd_encoding, ..Default::default() });
+        push(
+            CloudFormat::Pcd,
+            WriteOptions {
+                pcd_encoding,
+                ..Default::default()
+            },
+        );
     }
-    push(CloudFormat::Ply, WriteOptions { ply_encoding: PlyEncoding::Ascii, ..Default::default() });
+    push(
+        CloudFormat::Ply,
+        WriteOptions {
+            ply_encoding: PlyEncoding::Ascii,
+            ..Default::default()
+        },
+    );
     out
 }
 

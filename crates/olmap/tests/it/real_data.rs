@@ -98,7 +98,10 @@ fn octomap_scan_dat_and_its_bzip2() {
     );
     // Ranges 0.467-29.05 m from the sensor at the origin.
     let r = plain.cloud.stats().range.unwrap();
-    assert!((r.min - 0.467).abs() < 1e-3 && (r.max - 29.05).abs() < 1e-2, "{r:?}");
+    assert!(
+        (r.min - 0.467).abs() < 1e-3 && (r.max - 29.05).abs() < 1e-2,
+        "{r:?}"
+    );
     let packed = io::read_cloud(d.join("octomap_share_data/scan.dat.bz2")).unwrap();
     assert_eq!(packed.report.compression, Some("bzip2"));
     assert_eq!(packed.cloud, plain.cloud);
@@ -111,7 +114,10 @@ fn libpointmatcher_car_clouds() {
     let c400 = io::read_cloud(d.join("libpointmatcher_car/car_cloud400.csv")).unwrap();
     assert_eq!(c400.cloud.len(), 24_989);
     let normals = c400.cloud.normals().expect("car_cloud400 has normals");
-    assert!(normals.iter().all(|n| (n.norm() - 1.0).abs() < 1e-3), "normals are unit vectors");
+    assert!(
+        normals.iter().all(|n| (n.norm() - 1.0).abs() < 1e-3),
+        "normals are unit vectors"
+    );
     assert_box(
         &c400.cloud.bounding_box().unwrap(),
         [-59.57, -59.60, -10.72],
@@ -204,7 +210,12 @@ fn assert_pose(p: &Pose, t: [f64; 3], ypr_deg: [f64; 3], tol_m: f64, tol_deg: f6
     let (y, pi, r) = p.yaw_pitch_roll();
     let got = [y.to_degrees(), pi.to_degrees(), r.to_degrees()];
     for i in 0..3 {
-        assert!((tt[i] - t[i]).abs() <= tol_m, "{what}: t[{i}] = {} expected {}", tt[i], t[i]);
+        assert!(
+            (tt[i] - t[i]).abs() <= tol_m,
+            "{what}: t[{i}] = {} expected {}",
+            tt[i],
+            t[i]
+        );
         assert!(
             (got[i] - ypr_deg[i]).abs() <= tol_deg,
             "{what}: angle {i} = {} expected {}",
@@ -234,23 +245,55 @@ fn threedtk_frames_give_the_readme_reference_poses() {
         let r = &reference.poses[i];
         assert_eq!(r.name, format!("{i:03}"));
         let e = PoseError::between(&last, &r.pose);
-        assert!(e.translation_m < 1e-5 && e.rotation_deg < 1e-3, "{scan}: {e:?}");
+        assert!(
+            e.translation_m < 1e-5 && e.rotation_deg < 1e-3,
+            "{scan}: {e:?}"
+        );
     }
     // README §1.7: the other committed versions, including the legacy two-line layout.
     let history = [
-        ("scan001.frames.1604b63b", [1.5559, 0.0480, -0.1436], [-0.014, -2.204, 0.455]),
-        ("scan002.frames.1604b63b", [3.3631, 0.0127, -0.1357], [0.162, -2.765, 0.301]),
-        ("scan001.frames.38966dfc", [1.5258, 0.0189, -0.0259], [0.876, 1.768, 0.308]),
-        ("scan001.frames.cf17522d", [1.5258, 0.0189, -0.0259], [0.876, 1.768, 0.308]),
-        ("scan002.frames.38966dfc", [3.3253, 0.0716, -0.1187], [0.410, 1.271, 0.046]),
-        ("scan002.frames.4cc29d4c", [3.3779, 0.0805, -0.1565], [0.329, 0.430, 0.137]),
+        (
+            "scan001.frames.1604b63b",
+            [1.5559, 0.0480, -0.1436],
+            [-0.014, -2.204, 0.455],
+        ),
+        (
+            "scan002.frames.1604b63b",
+            [3.3631, 0.0127, -0.1357],
+            [0.162, -2.765, 0.301],
+        ),
+        (
+            "scan001.frames.38966dfc",
+            [1.5258, 0.0189, -0.0259],
+            [0.876, 1.768, 0.308],
+        ),
+        (
+            "scan001.frames.cf17522d",
+            [1.5258, 0.0189, -0.0259],
+            [0.876, 1.768, 0.308],
+        ),
+        (
+            "scan002.frames.38966dfc",
+            [3.3253, 0.0716, -0.1187],
+            [0.410, 1.271, 0.046],
+        ),
+        (
+            "scan002.frames.4cc29d4c",
+            [3.3779, 0.0805, -0.1565],
+            [0.329, 0.430, 0.137],
+        ),
     ];
     for (file, t, ypr) in history {
         let frames = slam6d::read_frames_path(dir.join("frames_history").join(file)).unwrap();
         assert_pose(&frames.last().unwrap().pose, t, ypr, 1e-4, 1e-3, file);
     }
-    let legacy = slam6d::read_frames_path(dir.join("frames_history/scan001.frames.38966dfc")).unwrap();
-    assert_eq!(legacy.len(), 88, "README §1.1: the legacy version holds 88 frames");
+    let legacy =
+        slam6d::read_frames_path(dir.join("frames_history/scan001.frames.38966dfc")).unwrap();
+    assert_eq!(
+        legacy.len(),
+        88,
+        "README §1.1: the legacy version holds 88 frames"
+    );
 }
 
 #[test]
@@ -259,8 +302,16 @@ fn threedtk_pose_files_give_the_readme_odometry() {
     // README §1.4 table.
     let expected = [
         ("scan000.pose", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
-        ("scan001.pose", [1.5692, 0.0311, -0.0751], [0.853, 1.357, 0.582]),
-        ("scan002.pose", [3.3797, 0.0800, -0.1535], [0.471, 1.113, 0.488]),
+        (
+            "scan001.pose",
+            [1.5692, 0.0311, -0.0751],
+            [0.853, 1.357, 0.582],
+        ),
+        (
+            "scan002.pose",
+            [3.3797, 0.0800, -0.1535],
+            [0.471, 1.113, 0.488],
+        ),
     ];
     for (file, t, ypr) in expected {
         let p = slam6d::read_pose_path(d.join("3dtk_dat").join(file)).unwrap();
@@ -282,5 +333,12 @@ fn car_pose_table() {
     let id = list.get("car_cloud400.csv").unwrap();
     assert!(PoseError::between(id, &Pose::identity()).translation_m < 1e-12);
     let t = list.get("car_cloud401.csv").unwrap();
-    assert_pose(t, [0.0614, 0.1914, -0.0339], [-8.853, -6.510, -9.053], 1e-4, 1e-3, "T_400_401");
+    assert_pose(
+        t,
+        [0.0614, 0.1914, -0.0339],
+        [-8.853, -6.510, -9.053],
+        1e-4,
+        1e-3,
+        "T_400_401",
+    );
 }

@@ -35,7 +35,11 @@ pub fn synthetic_cloud(n: usize) -> PointCloud {
         inten.push((next() * 1000.0) as f32);
         let n = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
         normals.push(n.cast::<f32>());
-        colors.push([(next() * 255.0) as u8, (next() * 255.0) as u8, (next() * 255.0) as u8]);
+        colors.push([
+            (next() * 255.0) as u8,
+            (next() * 255.0) as u8,
+            (next() * 255.0) as u8,
+        ]);
     }
     let mut c = PointCloud::from_points(pts).with_origin(Point3::new(0.25, -1.5, 0.75));
     c.set_intensity(Some(inten)).unwrap();
@@ -58,7 +62,11 @@ fn attributes_dropped(c: &PointCloud) -> PointCloud {
 #[test]
 fn full_attribute_formats_are_exact() {
     let cloud = synthetic_cloud(5000);
-    for enc in [PcdEncoding::Ascii, PcdEncoding::Binary, PcdEncoding::BinaryCompressed] {
+    for enc in [
+        PcdEncoding::Ascii,
+        PcdEncoding::Binary,
+        PcdEncoding::BinaryCompressed,
+    ] {
         let opts = WriteOptions {
             pcd_encoding: enc,
             ..Default::default()
@@ -124,7 +132,10 @@ fn failed_write_leaves_nothing_behind() {
     .unwrap_err();
     assert!(err.to_string().contains("keep.xyz"), "{err}");
     assert_eq!(std::fs::read_to_string(&target).unwrap(), "1 2 3\n");
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names.len(), 1, "temporary file left behind: {names:?}");
     // A file in a folder that does not exist: an error naming it, nothing created.
     let missing = dir.path().join("no/such/dir/out.pcd");

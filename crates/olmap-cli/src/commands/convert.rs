@@ -1,0 +1,197 @@
+//! `olmap convert`: convert a point cloud between formats, with optional filters.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
+use nalgebra::Point3;
+use olmap::geometry::{Aabb, Pose};
+use olmap::io::{self, CloudFormat, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions};
+
+use super::info::parse_format;
+
+/// PCD encodings on the command line.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum PcdEncodingArg {
+    /// Text.
+    Ascii,
+    /// Packed binary records.
+    Binary,
+    /// LZF-compressed binary.
+    BinaryCompressed,
+}
+
+/// Arguments of `olmap convert`.
+///
+/// Filters apply in this order: range band (distance from the sensor origin), transform,
+/// box and height band (in the transformed frame), voxel downsampling.
+#[derive(Args)]
+pub struct ConvertArgs {
+    /// Input point-cloud file (format from its name; see `olmap info --help`).
+    pub input: PathBuf,
+    /// Output file; its extension picks the format (.pcd .ply .xyz .3d .csv .bin .graph).
+    /// Written atomically: on error no partial file is left.
+    pub output: PathBuf,
+    /// Read the input as this format (pcd, ply, xyz, 3d, csv, kitti, graph).
+    #[arg(long, value_parser = parse_format)]
+    pub in_format: Option<CloudFormat>,
+    /// Write the output as this format whatever its extension.
+    #[arg(long, value_parser = parse_format)]
+    pub out_format: Option<CloudFormat>,
+    /// Encoding of PCD output.
+    #[arg(long, value_enum, default_value = "binary")]
+    pub pcd_encoding: PcdEncodingArg,
+    /// Write PLY as text instead of binary little-endian.
+    #[arg(long)]
+    pub ply_ascii: bool,
+    /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
+    #[arg(long = "3dtk-valid")]
+    pub threedtk_valid: bool,
+    /// Drop points closer than this to the sensor origin, metres.
+    #[arg(long, value_name = "M")]
+    pub min_range: Option<f64>,
+    /// Drop points farther than this from the sensor origin, metres.
+    #[arg(long, value_name = "M")]
+    pub max_range: Option<f64>,
+    /// Move the cloud by a pose `x,y,z,yaw,pitch,roll` (metres, degrees; ZYX Euler), i.e.
+    /// express it in the frame where the sensor frame has this pose.
+    #[arg(long, value_name = "X,Y,Z,YAW,PITCH,ROLL", allow_hyphen_values = true)]
+    pub transform: Option<String>,
+    /// Keep points inside the box `xmin,ymin,zmin,xmax,ymax,zmax` (metres).
+    #[arg(
+        long = "box",
+        value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+        allow_hyphen_values = true
+    )]
+    pub crop: Option<String>,
+    /// Keep points at or above this height, metres.
+    #[arg(long, value_name = "M", allow_hyphen_values = true)]
+    pub z_min: Option<f64>,
+    /// Keep points at or below this height, metres.
+    #[arg(long, value_name = "M", allow_hyphen_values = true)]
+    pub z_max: Option<f64>,
+    /// Voxel-grid downsample: one point (the centroid) per voxel of this edge, metres.
+    #[arg(long, value_name = "M")]
+    pub voxel: Option<f64>,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{what}: '{s}' is not a comma-separated list of numbers"))?;
+    if v.len() != N || v.iter().any(|x| !x.is_finite()) {
+        bail!("{what}: expected {N} finite numbers separated by commas, got '{s}'");
+    }
+    Ok(v.try_into().expect("length checked"))
+}
+
+/// Runs the command.
+pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
+    let start = Instant::now();
+    let transform = a
+        .transform
+        .as_deref()
+        .map(|s| parse_numbers::<6>(s, "--transform"))
+        .transpose()?
+        .map(|v| {
+            Pose::from_xyz_ypr(
+                v[0],
+                v[1],
+                v[2],
+                v[3].to_radians(),
+                v[4].to_radians(),
+                v[5].to_radians(),
+            )
+        });
+    let crop = a
+        .crop
+        .as_deref()
+        .map(|s| parse_numbers::<6>(s, "--box"))
+        .transpose()?
+        .map(|v| Aabb::new(Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])));
+    for (name, v) in [
+        ("--min-range", a.min_range),
+        ("--max-range", a.max_range),
+        ("--voxel", a.voxel),
+    ] {
+        if let Some(v) = v {
+            if !(v.is_finite() && v >= 0.0) {
+                bail!("{name} must be a non-negative number of metres, got {v}");
+            }
+        }
+    }
+    let read = ReadOptions {
+        format: a.in_format,
+        uos_valid_only: a.threedtk_valid,
+    };
+    let loaded = io::read_cloud_with(&a.input, &read)?;
+    let read_points = loaded.cloud.len();
+    let mut cloud = loaded.cloud;
+    if a.min_range.is_some() || a.max_range.is_some() {
+        cloud = cloud.range_band(
+            a.min_range.unwrap_or(0.0),
+            a.max_range.unwrap_or(f64::INFINITY),
+        );
+    }
+    if let Some(t) = &transform {
+        cloud = cloud.transformed(t);
+    }
+    if let Some(b) = &crop {
+        cloud = cloud.crop_box(b);
+    }
+    if a.z_min.is_some() || a.z_max.is_some() {
+        cloud = cloud.z_band(
+            a.z_min.unwrap_or(f64::NEG_INFINITY),
+            a.z_max.unwrap_or(f64::INFINITY),
+        );
+    }
+    if let Some(v) = a.voxel {
+        cloud = cloud.voxel_downsample(v)?;
+    }
+    let write = WriteOptions {
+        format: a.out_format,
+        pcd_encoding: match a.pcd_encoding {
+            PcdEncodingArg::Ascii => PcdEncoding::Ascii,
+            PcdEncodingArg::Binary => PcdEncoding::Binary,
+            PcdEncodingArg::BinaryCompressed => PcdEncoding::BinaryCompressed,
+        },
+        ply_encoding: if a.ply_ascii {
+            PlyEncoding::Ascii
+        } else {
+            PlyEncoding::BinaryLittleEndian
+        },
+    };
+    io::write_cloud(&a.output, &cloud, &write)?;
+    let seconds = start.elapsed().as_secs_f64();
+    if a.json {
+        let v = serde_json::json!({
+            "input": a.input.display().to_string(),
+            "input_format": loaded.report.format.name(),
+            "output": a.output.display().to_string(),
+            "points_read": read_points,
+            "points_written": cloud.len(),
+            "dropped_non_finite": loaded.report.dropped_non_finite,
+            "dropped_invalid": loaded.report.dropped_invalid,
+            "seconds": seconds,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "{} ({}, {} points) -> {} ({} points) in {:.2} s",
+            a.input.display(),
+            loaded.report.format,
+            read_points,
+            a.output.display(),
+            cloud.len(),
+            seconds
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

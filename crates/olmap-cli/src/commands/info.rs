@@ -1,0 +1,76 @@
+//! `olmap info`: describe point-cloud files.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use olmap::io::{self, CloudFormat, ReadOptions};
+
+use crate::report::{cloud_json, cloud_text};
+
+/// Arguments of `olmap info`.
+#[derive(Args)]
+pub struct InfoArgs {
+    /// Point-cloud files (.pcd .ply .xyz .txt .dat .asc .pts .3d .csv .bin .graph, optionally
+    /// .bz2). Every file is described even when an earlier one fails.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Read every file as this format (pcd, ply, xyz, 3d, csv, kitti, graph) instead of
+    /// guessing it from the file name.
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<CloudFormat>,
+    /// 3DTK .3d files: keep only returns between 20 cm and 3270 cm (drops near-sensor echoes
+    /// and the max-range sentinel).
+    #[arg(long = "3dtk-valid")]
+    pub threedtk_valid: bool,
+    /// Print one JSON array (one object per file) instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Parses a format name for clap.
+pub fn parse_format(s: &str) -> Result<CloudFormat, String> {
+    CloudFormat::from_name(s)
+        .ok_or_else(|| format!("unknown format '{s}'; known: pcd, ply, xyz, 3d, csv, kitti, graph"))
+}
+
+/// Runs the command.
+pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
+    let options = ReadOptions {
+        format: args.format,
+        uos_valid_only: args.threedtk_valid,
+    };
+    let mut json = Vec::new();
+    let mut failed = false;
+    for path in &args.files {
+        let shown = path.display().to_string();
+        match io::read_cloud_with(path, &options) {
+            Ok(loaded) => {
+                let stats = loaded.cloud.stats();
+                let o = loaded.cloud.origin();
+                let origin = [o.x, o.y, o.z];
+                if args.json {
+                    json.push(cloud_json(&shown, &stats, &loaded.report, origin));
+                } else {
+                    print!("{}", cloud_text(&shown, &stats, &loaded.report, origin));
+                }
+            }
+            Err(e) => {
+                failed = true;
+                if args.json {
+                    json.push(serde_json::json!({ "path": shown, "error": e.to_string() }));
+                } else {
+                    eprintln!("error: {e}");
+                }
+            }
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&json)?);
+    }
+    Ok(if failed {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    })
+}

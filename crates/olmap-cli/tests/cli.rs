@@ -1,0 +1,136 @@
+//! End-to-end tests of the `olmap` program.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn olmap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_olmap"))
+        .args(args)
+        .output()
+        .expect("the olmap binary runs")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("valid JSON on stdout")
+}
+
+fn data() -> Option<PathBuf> {
+    olmap::test_data::dir()
+}
+
+#[test]
+fn info_json_on_real_data() {
+    let Some(d) = data() else { return };
+    let scan = d.join("3dtk_dat/scan000.3d");
+    let v = json(&olmap(&[
+        "info",
+        "--json",
+        "--3dtk-valid",
+        scan.to_str().unwrap(),
+    ]));
+    // Data README §1.3: 77,987 valid points of 81,360.
+    assert_eq!(v[0]["points"], 77_987);
+    assert_eq!(v[0]["records"], 81_360);
+    assert_eq!(v[0]["dropped_invalid"], 81_360 - 77_987);
+    assert_eq!(v[0]["format"], "3DTK .3d");
+}
+
+#[test]
+fn info_reports_every_file_and_fails_on_a_bad_one() {
+    let Some(d) = data() else { return };
+    let good = d.join("octomap_share_data/scan.dat");
+    let bad = d.join("octomap_share_data/mapcoll.txt");
+    let out = olmap(&[
+        "info",
+        "--json",
+        good.to_str().unwrap(),
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v[0]["points"], 88_206);
+    assert!(v[1]["error"].as_str().unwrap().contains("mapcoll.txt"));
+}
+
+#[test]
+fn convert_filters_and_round_trips() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scan.pcd");
+    let scan = d.join("octomap_share_data/scan.dat");
+    let v = json(&olmap(&[
+        "convert",
+        "--json",
+        "--max-range",
+        "10",
+        "--z-min",
+        "-0.5",
+        "--pcd-encoding",
+        "binary-compressed",
+        scan.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]));
+    let written = v["points_written"].as_u64().unwrap();
+    assert!(written > 0 && written < 88_206);
+    let back = olmap::io::read_cloud(&out).unwrap();
+    assert_eq!(back.cloud.len() as u64, written);
+    assert_eq!(back.report.encoding, "binary_compressed");
+    let s = back.cloud.stats();
+    assert!(s.range.unwrap().max <= 10.0 + 1e-6);
+    assert!(s.bbox.unwrap().min.z >= -0.5 - 1e-6);
+}
+
+#[test]
+fn convert_refuses_bad_arguments_without_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.xyz");
+    std::fs::write(&input, "1 2 3\n4 5 6\n").unwrap();
+    let out = dir.path().join("out.pcd");
+    let r = olmap(&[
+        "convert",
+        "--box",
+        "1,2,3",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--box"));
+    let r = olmap(&[
+        "convert",
+        input.to_str().unwrap(),
+        dir.path().join("out.nope").to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("out.nope"));
+    let missing = dir.path().join("missing.pcd");
+    let r = olmap(&["convert", missing.to_str().unwrap(), out.to_str().unwrap()]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("missing.pcd"));
+    assert!(!out.exists());
+}
+
+#[test]
+fn demo_writes_files_that_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = json(&olmap(&[
+        "demo",
+        "--json",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]));
+    let files = v["files"].as_array().unwrap();
+    assert_eq!(files.len(), 4);
+    let scan_points = v["scan_points"].as_u64().unwrap();
+    // Every ray of the closed room hits something: 720 azimuths x 81 elevations.
+    assert_eq!(scan_points, 720 * 81);
+    for f in files {
+        let p = f["path"].as_str().unwrap();
+        let loaded = olmap::io::read_cloud(p).unwrap();
+        assert_eq!(loaded.cloud.len() as u64, f["points"].as_u64().unwrap());
+    }
+}
