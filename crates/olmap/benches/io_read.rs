@@ -56,8 +56,11 @@ fn lidar_like_cloud() -> PointCloud {
     c
 }
 
+/// A case name with its format and the encoded bytes.
+type Encoded = (String, (CloudFormat, Vec<u8>));
+
 fn encoded(case: &str) -> &'static (CloudFormat, Vec<u8>) {
-    static ALL: OnceLock<Vec<(String, (CloudFormat, Vec<u8>))>> = OnceLock::new();
+    static ALL: OnceLock<Vec<Encoded>> = OnceLock::new();
     let all = ALL.get_or_init(|| {
         let cloud = lidar_like_cloud();
         CASES

@@ -91,8 +91,8 @@ impl PointCloud {
                 a.normal += v[i].cast::<f64>();
             }
             if let Some(v) = colors {
-                for c in 0..3 {
-                    a.color[c] += v[i][c] as u32;
+                for (sum, &c) in a.color.iter_mut().zip(&v[i]) {
+                    *sum += c as u32;
                 }
             }
         }
