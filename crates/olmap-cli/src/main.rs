@@ -30,6 +30,9 @@ enum Command {
     Info(commands::info::InfoArgs),
     /// Convert a point cloud between formats, optionally filtering and transforming it.
     Convert(commands::convert::ConvertArgs),
+    /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
+    /// degrees, or convert them to an olmap pose list.
+    Poses(commands::poses::PosesArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
 }
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Info(a) => commands::info::run(&a),
         Command::Convert(a) => commands::convert::run(&a),
+        Command::Poses(a) => commands::poses::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
     };
     match result {

@@ -134,3 +134,28 @@ fn demo_writes_files_that_read_back() {
         assert_eq!(loaded.cloud.len() as u64, f["points"].as_u64().unwrap());
     }
 }
+
+#[test]
+fn poses_from_3dtk_frames_match_the_reference_list() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("poses.txt");
+    let frames: Vec<String> = ["scan000", "scan001", "scan002"]
+        .iter()
+        .map(|s| d.join(format!("3dtk_dat/{s}.frames")).display().to_string())
+        .collect();
+    let mut args = vec!["poses", "--json", "--out", out.to_str().unwrap()];
+    args.extend(frames.iter().map(String::as_str));
+    let v = json(&olmap(&args));
+    // Data README §1.6: scan001 at (1.5680, 0.0363, -0.0908) m, yaw 0.715 degrees.
+    assert_eq!(v[1]["name"], "scan001");
+    let xyz = v[1]["xyz_m"].as_array().unwrap();
+    assert!((xyz[0].as_f64().unwrap() - 1.5680).abs() < 1e-4);
+    assert!((v[1]["yaw_pitch_roll_deg"][0].as_f64().unwrap() - 0.715).abs() < 1e-3);
+    let written = olmap::geometry::PoseList::read_path(&out).unwrap();
+    let reference = olmap::geometry::PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    for (a, b) in written.poses.iter().zip(&reference.poses) {
+        let e = olmap::geometry::PoseError::between(&a.pose, &b.pose);
+        assert!(e.translation_m < 1e-5 && e.rotation_deg < 1e-3, "{}: {e:?}", a.name);
+    }
+}
