@@ -153,9 +153,14 @@ fn poses_from_3dtk_frames_match_the_reference_list() {
     assert!((xyz[0].as_f64().unwrap() - 1.5680).abs() < 1e-4);
     assert!((v[1]["yaw_pitch_roll_deg"][0].as_f64().unwrap() - 0.715).abs() < 1e-3);
     let written = olmap::geometry::PoseList::read_path(&out).unwrap();
-    let reference = olmap::geometry::PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    let reference =
+        olmap::geometry::PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
     for (a, b) in written.poses.iter().zip(&reference.poses) {
         let e = olmap::geometry::PoseError::between(&a.pose, &b.pose);
-        assert!(e.translation_m < 1e-5 && e.rotation_deg < 1e-3, "{}: {e:?}", a.name);
+        assert!(
+            e.translation_m < 1e-5 && e.rotation_deg < 1e-3,
+            "{}: {e:?}",
+            a.name
+        );
     }
 }

@@ -119,7 +119,9 @@ const REAL: [&str; 5] = [
 /// Read the real data files from disk.
 #[divan::bench(args = REAL, sample_count = 10, sample_size = 1)]
 fn real_file(bencher: Bencher, file: &str) {
-    let Some(dir) = olmap::test_data::dir() else { return };
+    let Some(dir) = olmap::test_data::dir() else {
+        return;
+    };
     let path = dir.join(file);
     let bytes = std::fs::metadata(&path).unwrap().len() as usize;
     let points = io::read_cloud(&path).unwrap().report.records as usize;

@@ -31,7 +31,8 @@ pub struct PosesArgs {
 }
 
 fn stem(path: &Path) -> String {
-    path.file_stem().map_or_else(|| "pose".into(), |s| s.to_string_lossy().into_owned())
+    path.file_stem()
+        .map_or_else(|| "pose".into(), |s| s.to_string_lossy().into_owned())
 }
 
 fn read_any(path: &Path, all_frames: bool, list: &mut PoseList) -> olmap::Result<()> {
@@ -62,7 +63,9 @@ fn pose_json(name: &str, p: &Pose) -> serde_json::Value {
     let t = p.translation();
     let (y, pi, r) = p.yaw_pitch_roll();
     let m = p.to_matrix4();
-    let rows: Vec<Vec<f64>> = (0..4).map(|i| (0..4).map(|j| m[(i, j)]).collect()).collect();
+    let rows: Vec<Vec<f64>> = (0..4)
+        .map(|i| (0..4).map(|j| m[(i, j)]).collect())
+        .collect();
     serde_json::json!({
         "name": name,
         "xyz_m": [t.x, t.y, t.z],
@@ -81,7 +84,11 @@ pub fn run(a: &PosesArgs) -> anyhow::Result<ExitCode> {
         list.write_path(out)?;
     }
     if a.json {
-        let v: Vec<_> = list.poses.iter().map(|np| pose_json(&np.name, &np.pose)).collect();
+        let v: Vec<_> = list
+            .poses
+            .iter()
+            .map(|np| pose_json(&np.name, &np.pose))
+            .collect();
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

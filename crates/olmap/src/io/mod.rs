@@ -390,7 +390,7 @@ fn detect_format<R: BufRead>(name: &Path, reader: &mut R, path: &Path) -> Result
         None => Err(Error::UnknownFormat {
             path: path.to_path_buf(),
             reason: if ext.eq_ignore_ascii_case("bt") || ext.eq_ignore_ascii_case("ot") {
-                "an OctoMap octree map, not a point cloud (octree maps are read by the occupancy module)".into()
+                "an OctoMap octree map, not a point cloud".into()
             } else if ext.is_empty() {
                 format!(
                     "no extension and no known signature; known extensions: {} (optionally + .bz2)",
