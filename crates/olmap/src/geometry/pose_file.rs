@@ -14,7 +14,7 @@ use std::io::{BufRead, Write};
 use std::path::Path;
 
 use super::pose::Pose;
-use crate::error::{Error, ParseError, Result};
+use crate::error::{ParseError, Result};
 use crate::io::text::{for_each_line, parse_f64};
 
 /// A pose with the name of the scan (or robot, or frame) it belongs to.
@@ -157,13 +157,7 @@ impl PoseList {
 
     /// Reads a pose file.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let reader = crate::io::open_buffered(path)?;
-        Self::read(reader).map_err(|source| Error::Read {
-            path: path.to_path_buf(),
-            format: "pose list",
-            source,
-        })
+        crate::io::parse_file(path.as_ref(), "pose list", Self::read)
     }
 
     /// Writes a pose file atomically (temporary file, then rename).

@@ -21,7 +21,7 @@ use super::text::{fields, for_each_line, is_blank_or_comment, parse_f64};
 use super::xyz::truncate;
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
-use crate::error::{Error, ParseError, Result};
+use crate::error::{ParseError, Result};
 use crate::geometry::{Pose, PoseList};
 
 #[derive(Default)]
@@ -268,12 +268,7 @@ pub fn read_pose_table<R: BufRead>(reader: R) -> Result<PoseList, ParseError> {
 
 /// Reads a pose table file; see [`read_pose_table`].
 pub fn read_pose_table_path(path: impl AsRef<Path>) -> Result<PoseList> {
-    let path = path.as_ref();
-    read_pose_table(super::open_buffered(path)?).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format: "CSV pose table",
-        source,
-    })
+    super::parse_file(path.as_ref(), "CSV pose table", read_pose_table)
 }
 
 /// Writes a pose table in the `carCloudList.csv` layout.

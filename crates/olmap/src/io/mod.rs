@@ -430,6 +430,20 @@ pub fn open_buffered(path: &Path) -> Result<BufReader<File>> {
     Ok(BufReader::with_capacity(1 << 18, file))
 }
 
+/// Opens `path` and runs a stream parser on it, wrapping its error with the path and the
+/// format name.
+pub(crate) fn parse_file<T>(
+    path: &Path,
+    format: &'static str,
+    parse: impl FnOnce(BufReader<File>) -> Result<T, ParseError>,
+) -> Result<T> {
+    parse(open_buffered(path)?).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        format,
+        source,
+    })
+}
+
 /// Reads a whole file into memory, with errors that name it.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     let mut r = open_buffered(path)?;

@@ -18,7 +18,7 @@ use std::path::Path;
 use nalgebra::{Matrix4, Rotation3, Vector3};
 
 use super::text::{for_each_line, is_blank_or_comment, parse_f64};
-use crate::error::{Error, ParseError, Result};
+use crate::error::{ParseError, Result};
 use crate::geometry::{pose_3dtk_cm_from_rh_m, pose_rh_m_from_3dtk_cm, Pose};
 
 /// Rotation tolerance for matrices written with six significant digits.
@@ -235,22 +235,12 @@ pub fn write_frames<W: Write>(mut w: W, frames: &[Frame]) -> std::io::Result<()>
 
 /// Reads a `.pose` file.
 pub fn read_pose_path(path: impl AsRef<Path>) -> Result<Pose> {
-    let path = path.as_ref();
-    read_pose(super::open_buffered(path)?).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format: "3DTK .pose",
-        source,
-    })
+    super::parse_file(path.as_ref(), "3DTK .pose", read_pose)
 }
 
 /// Reads a `.frames` file.
 pub fn read_frames_path(path: impl AsRef<Path>) -> Result<Vec<Frame>> {
-    let path = path.as_ref();
-    read_frames(super::open_buffered(path)?).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format: "3DTK .frames",
-        source,
-    })
+    super::parse_file(path.as_ref(), "3DTK .frames", read_frames)
 }
 
 /// The final registered pose of a `.frames` file (its last frame).
