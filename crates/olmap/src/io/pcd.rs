@@ -846,17 +846,46 @@ impl Plan {
 
     /// Decodes points `0..n` of `buf`, keeping the finite ones.
     fn decode(&self, buf: &[u8], n: usize, out: &mut CloudBuilder, report: &mut ReadReport) {
+        let numeric = self
+            .xyz
+            .iter()
+            .chain(&self.intensity)
+            .chain(self.normals.iter().flatten());
+        if numeric.into_iter().all(|a| a.scalar == Scalar::F32) {
+            // The usual case, compiled without the per-value type dispatch.
+            self.decode_as::<true>(buf, n, out, report);
+        } else {
+            self.decode_as::<false>(buf, n, out, report);
+        }
+    }
+
+    /// [`Plan::decode`]; with `ALL_F32` every numeric field is known to be `F 4`.
+    #[inline(always)]
+    fn decode_as<const ALL_F32: bool>(
+        &self,
+        buf: &[u8],
+        n: usize,
+        out: &mut CloudBuilder,
+        report: &mut ReadReport,
+    ) {
+        let value = |a: Accessor, i: usize| {
+            if ALL_F32 {
+                f64::from(f32::from_le_bytes(bytes_at(buf, a.base + i * a.stride)))
+            } else {
+                a.value(buf, i)
+            }
+        };
         for i in 0..n {
-            let xyz = self.xyz.map(|a| a.value(buf, i));
+            let xyz = self.xyz.map(|a| value(a, i));
             let Some(p) = finite_point(xyz, report) else {
                 continue;
             };
-            let intensity = self.intensity.map_or(0.0, |a| a.value(buf, i) as f32);
+            let intensity = self.intensity.map_or(0.0, |a| value(a, i) as f32);
             let normal = self.normals.map_or_else(Vector3::zeros, |n| {
                 Vector3::new(
-                    n[0].value(buf, i) as f32,
-                    n[1].value(buf, i) as f32,
-                    n[2].value(buf, i) as f32,
+                    value(n[0], i) as f32,
+                    value(n[1], i) as f32,
+                    value(n[2], i) as f32,
                 )
             });
             let rgb = self.rgb.map_or(0, |a| a.bits(buf, i));
