@@ -1293,7 +1293,7 @@ fn write_ascii<W: Write>(w: &mut W, n: usize, columns: &[Column]) -> io::Result<
             }
             let word = col.word(i);
             if col.is_float() {
-                super::text::push_f32(&mut text, f32::from_bits(word));
+                let _ = write!(text, "{}", f32::from_bits(word));
             } else {
                 let _ = write!(text, "{word}");
             }
