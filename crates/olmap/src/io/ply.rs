@@ -51,10 +51,15 @@
 //!   its header announces gives [`ParseError::Truncated`]. The reader never panics.
 //!
 //! # Writer
-//! [`write`] writes `binary_little_endian` (the default) or `ascii` with `float` x, y, z,
+//! [`write()`] writes `binary_little_endian` (the default) or `ascii` with `float` x, y, z,
 //! then `float intensity`, `float nx ny nz` and `uchar red green blue` where the cloud has
-//! them. Ascii floats use Rust's shortest round-trip form, so both encodings read back
-//! bit for bit.
+//! them. Ascii floats use Rust's shortest round-trip form (`{}`; the origin comment uses
+//! `{:?}`, which keeps huge and tiny `f64` short), so both encodings read back bit for bit.
+//!
+//! # Speed
+//! Binary vertex records without list properties are read in 1 MiB chunks and decoded
+//! column by column; `float` x y z take no detour through `f64`. Ascii lines are read into
+//! one reused buffer and split without allocating; the time goes into `str::parse`.
 
 use std::io::{self, BufRead, Read, Write};
 
@@ -186,8 +191,7 @@ impl Scalar {
     /// Parses an ascii token. `float` properties are parsed in single precision so that
     /// the value is the correctly rounded `f32` (no double rounding through `f64`).
     #[inline]
-    fn parse_text(self, token: &[u8]) -> Option<f64> {
-        let s = std::str::from_utf8(token).ok()?;
+    fn parse_text(self, s: &str) -> Option<f64> {
         match self {
             Scalar::F32 => s.parse::<f32>().ok().map(f64::from),
             _ => s.parse::<f64>().ok(),
@@ -616,17 +620,6 @@ struct Builder {
     report: ReadReport,
 }
 
-/// Converts a colour channel value to a byte: floats are on a 0..1 scale, integers are
-/// clamped (`as u8` saturates and maps NaN to 0).
-#[inline]
-fn color_byte(v: f64, is_float: bool) -> u8 {
-    if is_float {
-        (v * 255.0).round() as u8
-    } else {
-        v as u8
-    }
-}
-
 impl Builder {
     fn new(plan: &Plan, count: u64, report: ReadReport) -> Self {
         let cap = count.min(INITIAL_CAPACITY) as usize;
@@ -637,20 +630,6 @@ impl Builder {
             colors: plan.colors.then(|| Vec::with_capacity(cap)),
             color_float: plan.color_float,
             report,
-        }
-    }
-
-    /// Makes room for `n` more points (called once their data has been read).
-    fn reserve(&mut self, n: usize) {
-        self.points.reserve(n);
-        if let Some(v) = &mut self.intensity {
-            v.reserve(n);
-        }
-        if let Some(v) = &mut self.normals {
-            v.reserve(n);
-        }
-        if let Some(v) = &mut self.colors {
-            v.reserve(n);
         }
     }
 
@@ -681,6 +660,30 @@ impl Builder {
         }
     }
 
+    /// Removes the points from index `start` on that have a non-finite coordinate (with
+    /// their attributes), counting them.
+    fn drop_non_finite_from(&mut self, start: usize) {
+        let finite = |p: &Point3<f32>| p.x.is_finite() && p.y.is_finite() && p.z.is_finite();
+        let Some(tail) = self.points.get(start..) else {
+            return;
+        };
+        if tail.iter().all(finite) {
+            return;
+        }
+        let keep: Vec<bool> = tail.iter().map(finite).collect();
+        self.report.dropped_non_finite += keep.iter().filter(|k| !**k).count() as u64;
+        compact_from(&mut self.points, start, &keep);
+        if let Some(v) = &mut self.intensity {
+            compact_from(v, start, &keep);
+        }
+        if let Some(v) = &mut self.normals {
+            compact_from(v, start, &keep);
+        }
+        if let Some(v) = &mut self.colors {
+            compact_from(v, start, &keep);
+        }
+    }
+
     fn finish(self, origin: Point3<f64>) -> Result<LoadedCloud, ParseError> {
         let mut cloud = PointCloud::from_points(self.points).with_origin(origin);
         let attach = |r: crate::error::Result<()>| {
@@ -693,6 +696,33 @@ impl Builder {
             cloud,
             report: self.report,
         })
+    }
+}
+
+/// Keeps the elements of `v[start..]` whose flag in `keep` is set, in order.
+fn compact_from<T: Copy>(v: &mut Vec<T>, start: usize, keep: &[bool]) {
+    let mut w = start;
+    for (r, &k) in (start..v.len()).zip(keep) {
+        if k {
+            if let Some(&x) = v.get(r) {
+                if let Some(slot) = v.get_mut(w) {
+                    *slot = x;
+                }
+            }
+            w += 1;
+        }
+    }
+    v.truncate(w);
+}
+
+/// Converts a colour channel value to a byte: floats are on a 0..1 scale, integers are
+/// clamped (`as u8` saturates and maps NaN to 0).
+#[inline]
+fn color_byte(v: f64, is_float: bool) -> u8 {
+    if is_float {
+        (v * 255.0).round() as u8
+    } else {
+        v as u8
     }
 }
 
@@ -911,20 +941,10 @@ fn read_fixed_vertices<const BE: bool, R: BufRead>(
     plan: &Plan,
     out: &mut Builder,
 ) -> Result<(), ParseError> {
-    // (slot, byte offset in the record, type) of every property kept.
-    let mut fields = Vec::new();
-    let mut offset = 0;
-    for (i, p) in vertex.props.iter().enumerate() {
-        let ty = scalar_of(p);
-        if let Some(slot) = plan.slot(i) {
-            fields.push((slot, offset, ty));
-        }
-        offset += ty.size();
-    }
+    let layout = RecordLayout::new(vertex, plan);
     let per_chunk = (CHUNK_BYTES / size).max(1) as u64;
     let first = vertex.count.min(per_chunk) as usize;
     let mut buf = vec![0u8; first * size];
-    let mut slots = [0.0f64; SLOTS];
     let mut done = 0u64;
     while done < vertex.count {
         let n = (vertex.count - done).min(per_chunk) as usize;
@@ -938,29 +958,132 @@ fn read_fixed_vertices<const BE: bool, R: BufRead>(
                 done + (got / size) as u64
             )));
         }
-        out.reserve(n);
-        decode_records::<BE>(chunk, size, &fields, &mut slots, out);
+        layout.decode::<BE>(chunk, size, out);
         done += n as u64;
     }
     Ok(())
 }
 
-/// Decodes a chunk of fixed-size records.
-#[inline]
-fn decode_records<const BE: bool>(
-    chunk: &[u8],
-    size: usize,
-    fields: &[(usize, usize, Scalar)],
-    slots: &mut [f64; SLOTS],
-    out: &mut Builder,
-) {
-    for rec in chunk.chunks_exact(size) {
-        for &(slot, off, ty) in fields {
-            if let (Some(s), Some(b)) = (slots.get_mut(slot), rec.get(off..)) {
-                *s = ty.decode::<BE>(b);
-            }
+/// A value's place in a fixed-size binary record.
+#[derive(Debug, Clone, Copy)]
+struct Field {
+    off: usize,
+    ty: Scalar,
+}
+
+impl Field {
+    /// Stands for a value the record lacks (reads as NaN); never used for kept slots.
+    const ABSENT: Field = Field {
+        off: usize::MAX,
+        ty: Scalar::U8,
+    };
+
+    #[inline(always)]
+    fn read<const BE: bool>(self, rec: &[u8]) -> f64 {
+        rec.get(self.off..)
+            .map_or(f64::NAN, |b| self.ty.decode::<BE>(b))
+    }
+
+    /// Reads a colour channel (see [`color_byte`]); `uchar` is taken as is.
+    #[inline(always)]
+    fn color<const BE: bool>(self, rec: &[u8]) -> u8 {
+        match self.ty {
+            Scalar::U8 => rec.get(self.off).copied().unwrap_or(0),
+            ty => color_byte(self.read::<BE>(rec), ty.is_float()),
         }
-        out.push(slots);
+    }
+}
+
+/// Where the kept values lie in a fixed-size binary vertex record. Records are decoded
+/// column by column (all x y z of a chunk, then all intensities, ...), which keeps every
+/// loop free of branches other than the type dispatch.
+struct RecordLayout {
+    /// Per slot, the property feeding it.
+    at: [Option<Field>; SLOTS],
+}
+
+impl RecordLayout {
+    fn new(vertex: &Element, plan: &Plan) -> Self {
+        let mut at = [None; SLOTS];
+        let mut off = 0;
+        for (i, p) in vertex.props.iter().enumerate() {
+            let ty = scalar_of(p);
+            if let Some(slot) = plan.slot(i).and_then(|s| at.get_mut(s)) {
+                *slot = Some(Field { off, ty });
+            }
+            off += ty.size();
+        }
+        RecordLayout { at }
+    }
+
+    fn field(&self, slot: usize) -> Field {
+        self.at
+            .get(slot)
+            .copied()
+            .flatten()
+            .unwrap_or(Field::ABSENT)
+    }
+
+    fn triple(&self, first: usize) -> [Field; 3] {
+        [
+            self.field(first),
+            self.field(first + 1),
+            self.field(first + 2),
+        ]
+    }
+
+    /// Decodes a chunk of records into the builder, dropping non-finite points.
+    fn decode<const BE: bool>(&self, chunk: &[u8], size: usize, out: &mut Builder) {
+        let recs = || chunk.chunks_exact(size);
+        let start = out.points.len();
+        let [x, y, z] = self.triple(X);
+        if [x, y, z].iter().all(|f| f.ty == Scalar::F32) {
+            // The common case: no detour through f64.
+            out.points.extend(recs().map(|r| {
+                Point3::new(
+                    f32_at::<BE>(r, x.off),
+                    f32_at::<BE>(r, y.off),
+                    f32_at::<BE>(r, z.off),
+                )
+            }));
+        } else {
+            out.points.extend(recs().map(|r| {
+                Point3::new(
+                    x.read::<BE>(r) as f32,
+                    y.read::<BE>(r) as f32,
+                    z.read::<BE>(r) as f32,
+                )
+            }));
+        }
+        if let Some(v) = &mut out.intensity {
+            let f = self.field(INTENSITY);
+            v.extend(recs().map(|r| f.read::<BE>(r) as f32));
+        }
+        if let Some(v) = &mut out.normals {
+            let [a, b, c] = self.triple(NORMAL);
+            v.extend(recs().map(|r| {
+                Vector3::new(
+                    a.read::<BE>(r) as f32,
+                    b.read::<BE>(r) as f32,
+                    c.read::<BE>(r) as f32,
+                )
+            }));
+        }
+        if let Some(v) = &mut out.colors {
+            let [a, b, c] = self.triple(COLOR);
+            v.extend(recs().map(|r| [a.color::<BE>(r), b.color::<BE>(r), c.color::<BE>(r)]));
+        }
+        out.drop_non_finite_from(start);
+    }
+}
+
+/// The `float` at byte `off` of a record (NaN past its end, which callers rule out).
+#[inline(always)]
+fn f32_at<const BE: bool>(rec: &[u8], off: usize) -> f32 {
+    match rec.get(off..).and_then(<[u8]>::first_chunk) {
+        Some(a) if BE => f32::from_be_bytes(*a),
+        Some(a) => f32::from_le_bytes(*a),
+        None => f32::NAN,
     }
 }
 
@@ -1059,9 +1182,6 @@ fn read_ascii<R: BufRead>(
         parse_vertex_line(&lines.buf, vertex, plan, &mut slots).map_err(|reason| {
             ParseError::line(lines.line_no, format!("vertex {instance}: {reason}"))
         })?;
-        if instance % 65536 == 0 {
-            out.reserve(65536.min(vertex.count - instance) as usize);
-        }
         out.push(&slots);
     }
     Ok(())
@@ -1074,13 +1194,18 @@ fn parse_vertex_line(
     plan: &Plan,
     slots: &mut [f64; SLOTS],
 ) -> Result<(), String> {
-    let mut toks = tokens(line);
+    let line = std::str::from_utf8(line).map_err(|_| "not text (invalid UTF-8 bytes)")?;
+    let mut toks = line.split_ascii_whitespace();
     let mut next = |what: &str, name: &str, ty: Scalar| -> Result<f64, String> {
         let t = toks
             .next()
             .ok_or_else(|| format!("the line ends before {what} '{name}'"))?;
-        ty.parse_text(t)
-            .ok_or_else(|| format!("expected a number for {what} '{name}', found '{}'", clip(t)))
+        ty.parse_text(t).ok_or_else(|| {
+            format!(
+                "expected a number for {what} '{name}', found '{}'",
+                clip(t.as_bytes())
+            )
+        })
     };
     for (i, p) in vertex.props.iter().enumerate() {
         match p.kind {
@@ -1106,7 +1231,7 @@ fn parse_vertex_line(
         Some(t) => Err(format!(
             "more values than the {} properties declared (extra '{}')",
             vertex.props.len(),
-            clip(t)
+            clip(t.as_bytes())
         )),
     }
 }
@@ -1307,6 +1432,44 @@ mod tests {
                 assert_eq!(loaded.report.encoding, want);
             }
         }
+    }
+
+    #[test]
+    fn non_finite_points_are_dropped_with_their_attributes() {
+        let nan = f32::NAN;
+        let pts = vec![
+            Point3::new(1.0, 2.0, 3.0),
+            Point3::new(nan, 0.0, 0.0),
+            Point3::new(4.0, f32::INFINITY, 6.0),
+            Point3::new(7.0, 8.0, 9.0),
+        ];
+        let mut cloud = PointCloud::from_points(pts);
+        cloud.set_intensity(Some(vec![1.0, 2.0, 3.0, 4.0])).unwrap();
+        cloud
+            .set_colors(Some(vec![[1, 1, 1], [2, 2, 2], [3, 3, 3], [4, 4, 4]]))
+            .unwrap();
+        let keep = cloud.gather(&[0, 3]);
+        for enc in [PlyEncoding::BinaryLittleEndian, PlyEncoding::Ascii] {
+            let loaded = read(&to_bytes(&cloud, enc)[..]).unwrap();
+            assert_eq!(loaded.cloud, keep, "{enc:?}");
+            assert_eq!(loaded.report.records, 4);
+            assert_eq!(loaded.report.dropped_non_finite, 2);
+        }
+        // Doubles beyond the f32 range are dropped too.
+        let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n\
+            property double x\nproperty double y\nproperty double z\n\
+            property float intensity\nend_header\n"
+            .to_vec();
+        for (p, i) in [([1e300f64, 0.0, 0.0], 5.0f32), ([0.5, 0.25, -1.0], 6.0)] {
+            for v in p {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+            b.extend_from_slice(&i.to_le_bytes());
+        }
+        let loaded = read(&b[..]).unwrap();
+        assert_eq!(loaded.cloud.points(), [Point3::new(0.5, 0.25, -1.0)]);
+        assert_eq!(loaded.cloud.intensity().unwrap(), [6.0]);
+        assert_eq!(loaded.report.dropped_non_finite, 1);
     }
 
     #[test]
