@@ -81,7 +81,10 @@ fn headers_that_lie_about_counts() {
     // PLY announcing more vertices than present.
     // (Edit the header bytes only: the binary body must stay byte for byte.)
     let mut ply = valid_bytes(CloudFormat::Ply);
-    let at = ply.windows(17).position(|w| w == b"element vertex 50").unwrap();
+    let at = ply
+        .windows(17)
+        .position(|w| w == b"element vertex 50")
+        .unwrap();
     ply[at + 16] = b'1';
     let p = write(dir.path(), "lying.ply", &ply);
     let err = io::read_cloud(&p).unwrap_err();
