@@ -130,3 +130,30 @@ fn real_file(bencher: Bencher, file: &str) {
         .counter(ItemsCount::new(points))
         .bench(|| io::read_cloud(&path).unwrap());
 }
+
+/// Baseline for the binary readers: copying the binary PCD bytes into a new buffer (the
+/// least any reader that returns owned points must do).
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn baseline_copy_pcd_binary_bytes(bencher: Bencher) {
+    let (_, bytes) = encoded("pcd_binary");
+    bencher
+        .counter(BytesCount::new(bytes.len()))
+        .counter(ItemsCount::new(POINTS))
+        .bench(|| bytes.to_vec());
+}
+
+/// Baseline for the text readers: parsing the XYZ text's numbers with `str::parse::<f64>`
+/// and nothing else (no line handling, no cloud).
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn baseline_parse_xyz_numbers(bencher: Bencher) {
+    let (_, bytes) = encoded("xyz");
+    let text = std::str::from_utf8(bytes).unwrap();
+    bencher
+        .counter(BytesCount::new(bytes.len()))
+        .counter(ItemsCount::new(POINTS))
+        .bench(|| {
+            text.split_ascii_whitespace()
+                .map(|t| t.parse::<f64>().unwrap())
+                .sum::<f64>()
+        });
+}
