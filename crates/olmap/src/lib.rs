@@ -39,6 +39,7 @@ pub mod cloud;
 pub mod error;
 pub mod geometry;
 pub mod io;
+pub mod occupancy;
 pub mod test_data;
 
 pub use error::{Error, ParseError, Result};

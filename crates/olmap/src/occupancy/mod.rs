@@ -1,0 +1,18 @@
+//! Occupancy lists: sparse hashed 3D voxel maps of integer log-odds counts (thesis §5.3.1).
+//!
+//! * [`OccupancyList`]: voxel key -> count, only positive counts stored; built from clouds
+//!   (endpoints) or by ray tracing scans ([`OccupancyList::insert_scan`], thesis
+//!   Algorithm 2 with exact voxel traversal [`VoxelRay`]);
+//! * queries, filters, merging, transforms, statistics and map entropy (thesis (7.4)).
+//!
+//! Memory: one `u64` per hash slot holds the key and the count (see the `packed` layout),
+//! 10-15 bytes per stored voxel.
+
+mod list;
+mod packed;
+mod raytrace;
+mod table;
+
+pub use list::{OccupancyList, OccupancyStats};
+pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
+pub use raytrace::{InsertStats, SensorModel, VoxelRay};
