@@ -50,7 +50,10 @@ impl PartialEq for OccupancyList {
     fn eq(&self, other: &Self) -> bool {
         self.resolution == other.resolution
             && self.len() == other.len()
-            && self.table.entries().all(|e| other.table.get(entry_key(e)) == entry_count(e))
+            && self
+                .table
+                .entries()
+                .all(|e| other.table.get(entry_key(e)) == entry_count(e))
     }
 }
 
@@ -136,8 +139,9 @@ impl OccupancyList {
 
     #[inline]
     pub(crate) fn add_packed(&mut self, key: u64, increment: u16) {
-        self.table
-            .update(key, |c| (c as u32 + increment as u32).min(MAX_COUNT as u32) as u16);
+        self.table.update(key, |c| {
+            (c as u32 + increment as u32).min(MAX_COUNT as u32) as u16
+        });
     }
 
     #[inline]
@@ -183,7 +187,9 @@ impl OccupancyList {
     /// Sets the count of a voxel (0 removes it; counts above [`MAX_COUNT`] saturate).
     pub fn set(&mut self, key: VoxelKey, count: u32) -> Result<()> {
         let k = pack_key(key).ok_or_else(|| {
-            Error::InvalidArgument(format!("voxel key {key:?} is outside the representable range"))
+            Error::InvalidArgument(format!(
+                "voxel key {key:?} is outside the representable range"
+            ))
         })?;
         let c = count.min(MAX_COUNT as u32) as u16;
         self.table.update(k, |_| c);
@@ -192,7 +198,9 @@ impl OccupancyList {
 
     /// Every stored voxel and its count, in no particular order.
     pub fn iter(&self) -> impl Iterator<Item = (VoxelKey, u16)> + '_ {
-        self.table.entries().map(|e| (unpack_key(entry_key(e)), entry_count(e)))
+        self.table
+            .entries()
+            .map(|e| (unpack_key(entry_key(e)), entry_count(e)))
     }
 
     /// Every stored voxel sorted by key (x, then y, then z): a deterministic order for files
@@ -200,7 +208,9 @@ impl OccupancyList {
     pub fn sorted(&self) -> Vec<(VoxelKey, u16)> {
         let mut v: Vec<u64> = self.table.entries().collect();
         v.sort_unstable();
-        v.into_iter().map(|e| (unpack_key(entry_key(e)), entry_count(e))).collect()
+        v.into_iter()
+            .map(|e| (unpack_key(entry_key(e)), entry_count(e)))
+            .collect()
     }
 
     /// The centre of a voxel, metres.
@@ -279,7 +289,10 @@ impl OccupancyList {
     /// Voxel centres as a point cloud, counts as intensity.
     pub fn to_cloud(&self) -> PointCloud {
         let sorted = self.sorted();
-        let pts = sorted.iter().map(|(k, _)| self.center(*k).cast::<f32>()).collect();
+        let pts = sorted
+            .iter()
+            .map(|(k, _)| self.center(*k).cast::<f32>())
+            .collect();
         let mut c = PointCloud::from_points(pts);
         c.set_intensity(Some(sorted.iter().map(|(_, n)| *n as f32).collect()))
             .expect("one count per voxel");
@@ -305,7 +318,11 @@ impl OccupancyList {
         let bbox = (!self.is_empty()).then(|| {
             Aabb::new(
                 Point3::new(lo[0] as f64 * r, lo[1] as f64 * r, lo[2] as f64 * r),
-                Point3::new((hi[0] + 1) as f64 * r, (hi[1] + 1) as f64 * r, (hi[2] + 1) as f64 * r),
+                Point3::new(
+                    (hi[0] + 1) as f64 * r,
+                    (hi[1] + 1) as f64 * r,
+                    (hi[2] + 1) as f64 * r,
+                ),
             )
         });
         OccupancyStats {
@@ -331,11 +348,17 @@ impl OccupancyList {
     /// `-p ln p`.
     pub fn entropy(&self, p0: f64, volume_m3: Option<f64>, log_odds_per_count: f64) -> Result<f64> {
         if !(p0 > 0.0 && p0 < 1.0) {
-            return Err(Error::InvalidArgument(format!("p0 must be in (0, 1), got {p0}")));
+            return Err(Error::InvalidArgument(format!(
+                "p0 must be in (0, 1), got {p0}"
+            )));
         }
         let volume = match volume_m3 {
             Some(v) if v.is_finite() && v >= 0.0 => v,
-            Some(v) => return Err(Error::InvalidArgument(format!("volume must be >= 0 m³, got {v}"))),
+            Some(v) => {
+                return Err(Error::InvalidArgument(format!(
+                    "volume must be >= 0 m³, got {v}"
+                )))
+            }
             None => self.stats().bbox.map_or(0.0, |b| b.extent().product()),
         };
         let cells = volume / self.resolution.powi(3);

@@ -51,7 +51,11 @@ impl VoxelRay {
         };
         let s = start.coords / resolution;
         let e = end.coords / resolution;
-        if !(s.iter().chain(e.iter()).all(|v| v.is_finite() && v.abs() < 1e15)) {
+        if !(s
+            .iter()
+            .chain(e.iter())
+            .all(|v| v.is_finite() && v.abs() < 1e15))
+        {
             return ray;
         }
         let d: Vector3<f64> = e - s;
@@ -312,8 +316,9 @@ impl OccupancyList {
         stats.removed_voxels = (before - self.len()) as u64;
         let cap = model.max_count as u32;
         for &k in &hits {
-            self.table
-                .update(k, |c| (c as u32 + model.hit as u32).min(cap).max(c as u32) as u16);
+            self.table.update(k, |c| {
+                (c as u32 + model.hit as u32).min(cap).max(c as u32) as u16
+            });
         }
         Ok(stats)
     }
@@ -325,11 +330,29 @@ mod tests {
 
     #[test]
     fn axis_aligned_and_negative_rays() {
-        let keys: Vec<_> = VoxelRay::new(&Point3::new(-0.05, 0.0, 0.0), &Point3::new(-0.35, 0.0, 0.0), 0.1).collect();
-        assert_eq!(keys, (0..4).map(|i| VoxelKey::new(-1 - i, 0, 0)).collect::<Vec<_>>());
-        let same: Vec<_> = VoxelRay::new(&Point3::new(0.01, 0.01, 0.01), &Point3::new(0.02, 0.03, 0.04), 0.1).collect();
+        let keys: Vec<_> = VoxelRay::new(
+            &Point3::new(-0.05, 0.0, 0.0),
+            &Point3::new(-0.35, 0.0, 0.0),
+            0.1,
+        )
+        .collect();
+        assert_eq!(
+            keys,
+            (0..4)
+                .map(|i| VoxelKey::new(-1 - i, 0, 0))
+                .collect::<Vec<_>>()
+        );
+        let same: Vec<_> = VoxelRay::new(
+            &Point3::new(0.01, 0.01, 0.01),
+            &Point3::new(0.02, 0.03, 0.04),
+            0.1,
+        )
+        .collect();
         assert_eq!(same, vec![VoxelKey::new(0, 0, 0)]);
-        assert_eq!(VoxelRay::new(&Point3::new(f64::NAN, 0.0, 0.0), &Point3::origin(), 0.1).count(), 0);
+        assert_eq!(
+            VoxelRay::new(&Point3::new(f64::NAN, 0.0, 0.0), &Point3::origin(), 0.1).count(),
+            0
+        );
     }
 
     #[test]
@@ -338,7 +361,10 @@ mod tests {
         let b = Point3::new(2.71, 1.38, -0.93);
         let keys: Vec<_> = VoxelRay::new(&a, &b, 0.1).collect();
         assert_eq!(keys[0], VoxelKey::from_point(&a, 0.1).unwrap());
-        assert_eq!(*keys.last().unwrap(), VoxelKey::from_point(&b, 0.1).unwrap());
+        assert_eq!(
+            *keys.last().unwrap(),
+            VoxelKey::from_point(&b, 0.1).unwrap()
+        );
         for w in keys.windows(2) {
             let d = (w[1].x - w[0].x).abs() + (w[1].y - w[0].y).abs() + (w[1].z - w[0].z).abs();
             assert_eq!(d, 1);
@@ -351,7 +377,11 @@ mod tests {
         // Ten returns in the same voxel: one hit, not ten.
         let pts = vec![Point3::new(1.05f32, 0.05, 0.05); 10];
         let s = map
-            .insert_scan(&PointCloud::from_points(pts), &Pose::identity(), &SensorModel::default())
+            .insert_scan(
+                &PointCloud::from_points(pts),
+                &Pose::identity(),
+                &SensorModel::default(),
+            )
             .unwrap();
         assert_eq!(map.count_at(&Point3::new(1.05, 0.05, 0.05)), 1);
         assert_eq!(s.hit_voxels, 1);
@@ -361,7 +391,11 @@ mod tests {
             ..Default::default()
         };
         let s = map
-            .insert_scan(&PointCloud::from_points(vec![Point3::new(3.0, 0.05, 0.05)]), &Pose::identity(), &model)
+            .insert_scan(
+                &PointCloud::from_points(vec![Point3::new(3.0, 0.05, 0.05)]),
+                &Pose::identity(),
+                &model,
+            )
             .unwrap();
         assert_eq!((s.truncated, s.hit_voxels), (1, 0));
         assert_eq!(map.len(), 1);
@@ -372,8 +406,12 @@ mod tests {
             ..Default::default()
         };
         for _ in 0..3 {
-            map.insert_scan(&PointCloud::from_points(vec![Point3::new(1.05, 0.05, 0.05)]), &Pose::identity(), &model)
-                .unwrap();
+            map.insert_scan(
+                &PointCloud::from_points(vec![Point3::new(1.05, 0.05, 0.05)]),
+                &Pose::identity(),
+                &model,
+            )
+            .unwrap();
         }
         assert_eq!(map.count_at(&Point3::new(1.05, 0.05, 0.05)), 7);
     }

@@ -148,7 +148,11 @@ impl VoxelTable {
             }
             let k = self.home(entry_key(e));
             // The entry at j may stay when its home lies cyclically in (i, j].
-            let stays = if i <= j { i < k && k <= j } else { i < k || k <= j };
+            let stays = if i <= j {
+                i < k && k <= j
+            } else {
+                i < k || k <= j
+            };
             if !stays {
                 self.slots[i] = e;
                 i = j;
@@ -165,7 +169,9 @@ impl VoxelTable {
 
     /// Shrinks the slots to the smallest capacity that keeps the load at most 0.8.
     pub fn shrink_to_fit(&mut self) {
-        let want = (self.len * MAX_LOAD_DEN).div_ceil(MAX_LOAD_NUM).max(MIN_CAPACITY);
+        let want = (self.len * MAX_LOAD_DEN)
+            .div_ceil(MAX_LOAD_NUM)
+            .max(MIN_CAPACITY);
         if want < self.slots.len() {
             let old = std::mem::replace(&mut self.slots, vec![0; want]);
             self.len = 0;
