@@ -9,10 +9,13 @@
 //! 10-15 bytes per stored voxel.
 
 mod list;
+mod overlap;
 mod packed;
+mod pyramid;
 mod raytrace;
 mod table;
 
 pub use list::{OccupancyList, OccupancyStats};
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
+pub use pyramid::Pyramid;
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};

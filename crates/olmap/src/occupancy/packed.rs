@@ -48,7 +48,7 @@ pub fn unpack_key(p: PackedKey) -> VoxelKey {
 /// A table entry from a packed key and a count in `1..=MAX_COUNT`.
 #[inline]
 pub fn entry(key: PackedKey, count: u16) -> u64 {
-    debug_assert!(count >= 1 && count <= MAX_COUNT);
+    debug_assert!((1..=MAX_COUNT).contains(&count));
     (key << COUNT_BITS) | count as u64
 }
 

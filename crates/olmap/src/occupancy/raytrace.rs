@@ -238,7 +238,18 @@ impl OccupancyList {
         t_map_sensor: &Pose,
         model: &SensorModel,
     ) -> Result<InsertStats> {
-        if !(model.max_range > 0.0) || model.max_count == 0 || model.max_count > MAX_COUNT {
+        Ok(self.insert_scan_tracked(cloud, t_map_sensor, model)?.0)
+    }
+
+    /// [`OccupancyList::insert_scan`], also returning the packed keys it may have changed
+    /// (every voxel hit or missed).
+    pub(crate) fn insert_scan_tracked(
+        &mut self,
+        cloud: &PointCloud,
+        t_map_sensor: &Pose,
+        model: &SensorModel,
+    ) -> Result<(InsertStats, Vec<u64>)> {
+        if model.max_range.is_nan() || model.max_range <= 0.0 || model.max_count == 0 || model.max_count > MAX_COUNT {
             return Err(Error::InvalidArgument(format!(
                 "sensor model needs max_range > 0 and 1 <= max_count <= {MAX_COUNT}, got {model:?}"
             )));
@@ -320,7 +331,8 @@ impl OccupancyList {
                 (c as u32 + model.hit as u32).min(cap).max(c as u32) as u16
             });
         }
-        Ok(stats)
+        misses.append(&mut hits);
+        Ok((stats, misses))
     }
 }
 

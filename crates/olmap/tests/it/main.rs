@@ -2,6 +2,7 @@
 
 mod bad_input;
 mod fuzz;
+mod occupancy;
 mod real_data;
 mod round_trip;
 
