@@ -20,6 +20,7 @@
 //! [`ReadReport::dropped_non_finite`]. Writers write to a temporary file beside the target
 //! and rename it into place, so a failed write never leaves a half-written file.
 
+pub mod crc32;
 pub mod csv;
 pub mod kitti;
 pub mod lzf;

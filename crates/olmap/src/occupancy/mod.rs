@@ -9,6 +9,7 @@
 //! 10-15 bytes per stored voxel.
 
 mod list;
+mod olm;
 mod overlap;
 mod packed;
 mod pyramid;
@@ -16,6 +17,7 @@ mod raytrace;
 mod table;
 
 pub use list::{OccupancyList, OccupancyStats};
+pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};

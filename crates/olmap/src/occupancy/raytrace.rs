@@ -249,7 +249,11 @@ impl OccupancyList {
         t_map_sensor: &Pose,
         model: &SensorModel,
     ) -> Result<(InsertStats, Vec<u64>)> {
-        if model.max_range.is_nan() || model.max_range <= 0.0 || model.max_count == 0 || model.max_count > MAX_COUNT {
+        if model.max_range.is_nan()
+            || model.max_range <= 0.0
+            || model.max_count == 0
+            || model.max_count > MAX_COUNT
+        {
             return Err(Error::InvalidArgument(format!(
                 "sensor model needs max_range > 0 and 1 <= max_count <= {MAX_COUNT}, got {model:?}"
             )));

@@ -159,7 +159,11 @@ fn random_scan(seed: u64, n: usize) -> PointCloud {
     };
     let pts = (0..n)
         .map(|_| {
-            let (az, el, r) = (next() * std::f64::consts::TAU, next() * 1.2 - 0.6, 0.3 + next() * 6.0);
+            let (az, el, r) = (
+                next() * std::f64::consts::TAU,
+                next() * 1.2 - 0.6,
+                0.3 + next() * 6.0,
+            );
             Point3::new(
                 (r * el.cos() * az.cos()) as f32,
                 (r * el.cos() * az.sin()) as f32,

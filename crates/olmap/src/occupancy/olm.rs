@@ -1,0 +1,256 @@
+//! `.olm`: olmap's own compact binary file for occupancy lists.
+//!
+//! Layout, all integers little-endian:
+//! ```text
+//! magic       8 bytes   "OLMAP\0\r\n"   (the CR LF catches text-mode transfers)
+//! version     u32       1
+//! resolution  f64       voxel edge in metres, finite and > 0
+//! voxels      u64       number of stored voxels
+//! keys        voxels x LEB128 varint: the packed keys in ascending order, each stored as
+//!                       the difference from the previous one (the first from 0)
+//! counts      voxels x LEB128 varint: the count of each voxel, 1..=1023, in key order
+//! crc32       u32       CRC-32 (IEEE) of every byte before it
+//! ```
+//! A packed key is `((x + 2^17) << 36) | ((y + 2^17) << 18) | (z + 2^17)`: sorted packed keys
+//! walk along z first, so most differences are small and take one or two bytes; counts
+//! are mostly 1-2 and take one byte. A file of a scan is about 3-5 bytes per voxel.
+//! Saving then loading gives back exactly the same list; nothing after the checksum is
+//! allowed.
+
+use std::io::{BufRead, Write};
+use std::path::Path;
+
+use super::list::{check_resolution, OccupancyList};
+use super::packed::{entry_count, entry_key, MAX_COUNT};
+use super::table::VoxelTable;
+use crate::error::{Location, ParseError, Result};
+use crate::io::crc32::Crc32;
+
+/// The 8 bytes every `.olm` file starts with.
+pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
+const VERSION: u32 = 1;
+const MAX_PACKED_KEY: u64 = (1 << 54) - 1;
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+struct Reader<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&[u8], ParseError> {
+        if self.data.len() - self.pos < n {
+            return Err(ParseError::Truncated(format!(
+                "{what} at byte {} needs {n} bytes, {} left",
+                self.pos,
+                self.data.len() - self.pos
+            )));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+
+    fn varint(&mut self, what: &str) -> Result<u64, ParseError> {
+        let start = self.pos;
+        let mut v = 0u64;
+        for shift in (0..64).step_by(7) {
+            let b = *self.take(1, what)?.first().expect("one byte");
+            v |= ((b & 0x7F) as u64) << shift;
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        Err(ParseError::at(
+            Location::Byte(start as u64),
+            format!("{what}: varint longer than 10 bytes"),
+        ))
+    }
+}
+
+impl OccupancyList {
+    /// Writes the list as `.olm`.
+    pub fn write_olm<W: Write>(&self, mut w: W) -> std::io::Result<()> {
+        let mut entries: Vec<u64> = self.table.entries().collect();
+        entries.sort_unstable();
+        let mut out = Vec::with_capacity(32 + entries.len() * 4);
+        out.extend_from_slice(OLM_MAGIC);
+        out.extend_from_slice(&VERSION.to_le_bytes());
+        out.extend_from_slice(&self.resolution().to_le_bytes());
+        out.extend_from_slice(&(entries.len() as u64).to_le_bytes());
+        let mut prev = 0u64;
+        for &e in &entries {
+            put_varint(&mut out, entry_key(e) - prev);
+            prev = entry_key(e);
+        }
+        for &e in &entries {
+            put_varint(&mut out, entry_count(e) as u64);
+        }
+        let mut crc = Crc32::default();
+        crc.update(&out);
+        out.extend_from_slice(&crc.finish().to_le_bytes());
+        w.write_all(&out)
+    }
+
+    /// Reads a `.olm` stream.
+    pub fn read_olm<R: BufRead>(mut reader: R) -> Result<OccupancyList, ParseError> {
+        let mut data = Vec::new();
+        reader.read_to_end(&mut data)?;
+        if data.is_empty() {
+            return Err(ParseError::Empty);
+        }
+        let mut r = Reader {
+            data: &data,
+            pos: 0,
+        };
+        if r.take(8, "magic")? != OLM_MAGIC {
+            return Err(ParseError::at(
+                Location::Byte(0),
+                "not an .olm file (bad magic bytes)",
+            ));
+        }
+        let version = u32::from_le_bytes(r.take(4, "version")?.try_into().expect("4"));
+        if version != VERSION {
+            return Err(ParseError::Unsupported(format!(
+                ".olm version {version} (this reader knows {VERSION})"
+            )));
+        }
+        let resolution = f64::from_le_bytes(r.take(8, "resolution")?.try_into().expect("8"));
+        check_resolution(resolution)
+            .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
+        let n = u64::from_le_bytes(r.take(8, "voxel count")?.try_into().expect("8"));
+        // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
+        if n.saturating_mul(2) > (data.len() - r.pos) as u64 {
+            return Err(ParseError::Truncated(format!(
+                "{n} voxels announced but only {} bytes follow",
+                data.len() - r.pos
+            )));
+        }
+        let n = n as usize;
+        let mut keys = Vec::with_capacity(n);
+        let mut key = 0u64;
+        for i in 0..n {
+            let at = r.pos as u64;
+            let d = r.varint("key")?;
+            if i > 0 && d == 0 {
+                return Err(ParseError::at(
+                    Location::Byte(at),
+                    "keys are not strictly increasing",
+                ));
+            }
+            key = key
+                .checked_add(d)
+                .filter(|&k| k <= MAX_PACKED_KEY)
+                .ok_or_else(|| {
+                    ParseError::at(Location::Byte(at), "key outside the representable range")
+                })?;
+            keys.push(key);
+        }
+        let mut table = VoxelTable::with_capacity(n);
+        for &k in &keys {
+            let at = r.pos as u64;
+            let c = r.varint("count")?;
+            if c == 0 || c > MAX_COUNT as u64 {
+                return Err(ParseError::at(
+                    Location::Byte(at),
+                    format!("count {c} outside 1..={MAX_COUNT}"),
+                ));
+            }
+            table.update(k, |_| c as u16);
+        }
+        let body_end = r.pos;
+        let stored = u32::from_le_bytes(r.take(4, "checksum")?.try_into().expect("4"));
+        let mut crc = Crc32::default();
+        crc.update(&data[..body_end]);
+        if crc.finish() != stored {
+            return Err(ParseError::Malformed(format!(
+                "checksum mismatch (stored {stored:08x}, computed {:08x}): the file is damaged",
+                crc.finish()
+            )));
+        }
+        if r.pos != data.len() {
+            return Err(ParseError::Malformed(format!(
+                "{} unexpected bytes after the checksum",
+                data.len() - r.pos
+            )));
+        }
+        let mut list = OccupancyList::new(resolution).expect("checked");
+        list.table = table;
+        Ok(list)
+    }
+
+    /// Writes a `.olm` file atomically.
+    pub fn write_olm_path(&self, path: impl AsRef<Path>) -> Result<()> {
+        crate::io::write_atomic(path.as_ref(), "olmap .olm", |w| self.write_olm(w))
+    }
+
+    /// Reads a `.olm` file.
+    pub fn read_olm_path(path: impl AsRef<Path>) -> Result<OccupancyList> {
+        crate::io::parse_file(path.as_ref(), "olmap .olm", Self::read_olm)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::VoxelKey;
+
+    fn sample() -> OccupancyList {
+        let mut l = OccupancyList::new(0.05).unwrap();
+        for (i, k) in [
+            (-131072, -131072, -131072),
+            (0, 0, 0),
+            (0, 0, 1),
+            (5, -3, 2),
+            (131071, 131071, 131071),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            l.set(VoxelKey::new(k.0, k.1, k.2), [1, 2, 1023, 7, 300][i])
+                .unwrap();
+        }
+        l
+    }
+
+    #[test]
+    fn round_trip_is_exact() {
+        let l = sample();
+        let mut buf = Vec::new();
+        l.write_olm(&mut buf).unwrap();
+        let back = OccupancyList::read_olm(&buf[..]).unwrap();
+        assert_eq!(back, l);
+        assert_eq!(back.sorted(), l.sorted());
+        let empty = OccupancyList::new(0.1).unwrap();
+        let mut buf = Vec::new();
+        empty.write_olm(&mut buf).unwrap();
+        assert_eq!(OccupancyList::read_olm(&buf[..]).unwrap(), empty);
+    }
+
+    #[test]
+    fn damage_is_detected() {
+        let mut buf = Vec::new();
+        sample().write_olm(&mut buf).unwrap();
+        for i in 0..buf.len() {
+            let mut bad = buf.clone();
+            bad[i] ^= 0x10;
+            assert!(
+                OccupancyList::read_olm(&bad[..]).is_err(),
+                "flip at byte {i} went unnoticed"
+            );
+        }
+        for cut in 0..buf.len() {
+            assert!(OccupancyList::read_olm(&buf[..cut]).is_err());
+        }
+        let mut longer = buf.clone();
+        longer.push(0);
+        assert!(OccupancyList::read_olm(&longer[..]).is_err());
+    }
+}
