@@ -4,6 +4,7 @@
 //! Errors are printed as one line naming the file and the reason, with a non-zero exit
 //! status (1 for a failure, 2 for a bad command line).
 
+mod args;
 mod commands;
 mod report;
 
@@ -26,10 +27,16 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Describe point-cloud files: format, points, bounding box, ranges, dropped points.
+    /// Describe point-cloud and map files: format, points or voxels, bounding box, ranges.
     Info(commands::info::InfoArgs),
     /// Convert a point cloud between formats, optionally filtering and transforming it.
     Convert(commands::convert::ConvertArgs),
+    /// Build an occupancy-list map from point clouds (endpoints or ray tracing).
+    Voxelize(commands::voxelize::VoxelizeArgs),
+    /// Write a map as another map format or as a cloud of voxel centres.
+    Export(commands::map::ExportArgs),
+    /// Merge maps of the same resolution (counts add).
+    Merge(commands::map::MergeArgs),
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
@@ -43,6 +50,9 @@ fn main() -> ExitCode {
         Command::Info(a) => commands::info::run(&a),
         Command::Convert(a) => commands::convert::run(&a),
         Command::Poses(a) => commands::poses::run(&a),
+        Command::Voxelize(a) => commands::voxelize::run(&a),
+        Command::Export(a) => commands::map::export(&a),
+        Command::Merge(a) => commands::map::merge(&a),
         Command::Demo(a) => commands::demo::run(&a),
     };
     match result {

@@ -111,3 +111,49 @@ pub fn cloud_text(path: &str, stats: &CloudStats, report: &ReadReport, origin: [
     }
     format!("{path}\n{s}")
 }
+
+/// The JSON object describing a map file.
+pub fn map_json(path: &str, format: &str, s: &olmap::occupancy::OccupancyStats) -> Value {
+    json!({
+        "path": path,
+        "format": format,
+        "resolution": s.resolution,
+        "voxels": s.voxels,
+        "bbox": s.bbox.as_ref().map(aabb_json),
+        "total_count": s.total_count,
+        "max_count": s.max_count,
+        "memory_bytes": s.memory_bytes,
+    })
+}
+
+/// The human-readable description of a map file.
+pub fn map_text(path: &str, format: &str, s: &olmap::occupancy::OccupancyStats) -> String {
+    let mut out = format!("{path}\n");
+    let mut line = |k: &str, v: String| out.push_str(&format!("  {k:<14}{v}\n"));
+    line("format", format.to_string());
+    line("resolution", format!("{} m", s.resolution));
+    line("voxels", s.voxels.to_string());
+    if let Some(b) = &s.bbox {
+        line(
+            "bbox min",
+            format!("({:.3}, {:.3}, {:.3}) m", b.min.x, b.min.y, b.min.z),
+        );
+        line(
+            "bbox max",
+            format!("({:.3}, {:.3}, {:.3}) m", b.max.x, b.max.y, b.max.z),
+        );
+    }
+    line(
+        "counts",
+        format!("total {}, max {}", s.total_count, s.max_count),
+    );
+    line(
+        "memory",
+        format!(
+            "{} bytes ({:.1} per voxel)",
+            s.memory_bytes,
+            s.bytes_per_voxel()
+        ),
+    );
+    out
+}

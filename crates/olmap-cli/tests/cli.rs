@@ -164,3 +164,62 @@ fn poses_from_3dtk_frames_match_the_reference_list() {
         );
     }
 }
+
+#[test]
+fn voxelize_info_export_merge() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("m.olm");
+    let scans: Vec<String> = (0..3)
+        .map(|i| {
+            d.join(format!("3dtk_dat/scan00{i}.3d"))
+                .display()
+                .to_string()
+        })
+        .collect();
+    let poses = d.join("3dtk_dat/reference_poses_rh_m.txt");
+    let mut args = vec![
+        "voxelize",
+        "--json",
+        "--ray-trace",
+        "--3dtk-valid",
+        "--resolution",
+        "0.1",
+        "--poses",
+        poses.to_str().unwrap(),
+        "-o",
+        map.to_str().unwrap(),
+    ];
+    args.extend(scans.iter().map(String::as_str));
+    let v = json(&olmap(&args));
+    // README §1.3: 77,987 + 78,320 + 78,118 valid points.
+    assert_eq!(v["points"], 77_987 + 78_320 + 78_118);
+    let voxels = v["voxels"].as_u64().unwrap();
+    assert!((10_000..100_000).contains(&voxels), "{voxels}");
+    let info = json(&olmap(&["info", "--json", map.to_str().unwrap()]));
+    assert_eq!(info[0]["voxels"].as_u64().unwrap(), voxels);
+    assert_eq!(info[0]["resolution"], 0.1);
+    // Export voxel centres as PLY with counts as intensity.
+    let ply = dir.path().join("m.ply");
+    let out = olmap(&["export", map.to_str().unwrap(), "-o", ply.to_str().unwrap()]);
+    assert!(out.status.success());
+    let cloud = olmap::io::read_cloud(&ply).unwrap().cloud;
+    assert_eq!(cloud.len() as u64, voxels);
+    assert!(cloud.intensity().unwrap().iter().all(|&c| c >= 1.0));
+    // Merging a map with itself doubles every count and keeps the voxels.
+    let merged = dir.path().join("mm.olm");
+    let out = olmap(&[
+        "merge",
+        map.to_str().unwrap(),
+        map.to_str().unwrap(),
+        "-o",
+        merged.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let a = olmap::occupancy::read_map(&map).unwrap().map;
+    let b = olmap::occupancy::read_map(&merged).unwrap().map;
+    assert_eq!(a.len(), b.len());
+    assert!(a
+        .iter()
+        .all(|(k, c)| b.count(k) == (2 * c).min(olmap::occupancy::MAX_COUNT)));
+}

@@ -4,13 +4,14 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use clap::{Args, ValueEnum};
 use nalgebra::Point3;
-use olmap::geometry::{Aabb, Pose};
+use olmap::geometry::Aabb;
 use olmap::io::{self, CloudFormat, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions};
 
 use super::info::parse_format;
+use crate::args::{parse_numbers, parse_pose};
 
 /// PCD encodings on the command line.
 #[derive(Clone, Copy, ValueEnum)]
@@ -80,36 +81,14 @@ pub struct ConvertArgs {
     pub json: bool,
 }
 
-fn parse_numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("{what}: '{s}' is not a comma-separated list of numbers"))?;
-    if v.len() != N || v.iter().any(|x| !x.is_finite()) {
-        bail!("{what}: expected {N} finite numbers separated by commas, got '{s}'");
-    }
-    Ok(v.try_into().expect("length checked"))
-}
-
 /// Runs the command.
 pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
     let start = Instant::now();
     let transform = a
         .transform
         .as_deref()
-        .map(|s| parse_numbers::<6>(s, "--transform"))
-        .transpose()?
-        .map(|v| {
-            Pose::from_xyz_ypr(
-                v[0],
-                v[1],
-                v[2],
-                v[3].to_radians(),
-                v[4].to_radians(),
-                v[5].to_radians(),
-            )
-        });
+        .map(|s| parse_pose(s, "--transform"))
+        .transpose()?;
     let crop = a
         .crop
         .as_deref()

@@ -6,13 +6,15 @@ use std::process::ExitCode;
 use clap::Args;
 use olmap::io::{self, CloudFormat, ReadOptions};
 
-use crate::report::{cloud_json, cloud_text};
+use olmap::occupancy::{self, MapFormat};
+
+use crate::report::{cloud_json, cloud_text, map_json, map_text};
 
 /// Arguments of `olmap info`.
 #[derive(Args)]
 pub struct InfoArgs {
     /// Point-cloud files (.pcd .ply .xyz .txt .dat .asc .pts .3d .csv .bin .graph, optionally
-    /// .bz2). Every file is described even when an earlier one fails.
+    /// .bz2) and map files (.olm). Every file is described even when an earlier one fails.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// Read every file as this format (pcd, ply, xyz, 3d, csv, kitti, graph) instead of
@@ -44,6 +46,28 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let mut failed = false;
     for path in &args.files {
         let shown = path.display().to_string();
+        if MapFormat::from_path(path).is_some() {
+            match occupancy::read_map(path) {
+                Ok(loaded) => {
+                    let stats = loaded.map.stats();
+                    let name = loaded.format.name();
+                    if args.json {
+                        json.push(map_json(&shown, name, &stats));
+                    } else {
+                        print!("{}", map_text(&shown, name, &stats));
+                    }
+                }
+                Err(e) => {
+                    failed = true;
+                    if args.json {
+                        json.push(serde_json::json!({ "path": shown, "error": e.to_string() }));
+                    } else {
+                        eprintln!("error: {e}");
+                    }
+                }
+            }
+            continue;
+        }
         match io::read_cloud_with(path, &options) {
             Ok(loaded) => {
                 let stats = loaded.cloud.stats();

@@ -3,4 +3,6 @@
 pub mod convert;
 pub mod demo;
 pub mod info;
+pub mod map;
 pub mod poses;
+pub mod voxelize;

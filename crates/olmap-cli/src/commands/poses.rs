@@ -35,7 +35,8 @@ fn stem(path: &Path) -> String {
         .map_or_else(|| "pose".into(), |s| s.to_string_lossy().into_owned())
 }
 
-fn read_any(path: &Path, all_frames: bool, list: &mut PoseList) -> olmap::Result<()> {
+/// Appends the poses of any supported pose file to `list`.
+pub fn read_any(path: &Path, all_frames: bool, list: &mut PoseList) -> olmap::Result<()> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())

@@ -8,6 +8,7 @@
 //! Memory: one `u64` per hash slot holds the key and the count (see the `packed` layout),
 //! 10-15 bytes per stored voxel.
 
+mod file;
 mod list;
 mod olm;
 mod overlap;
@@ -16,6 +17,7 @@ mod pyramid;
 mod raytrace;
 mod table;
 
+pub use file::{read_map, write_map, LoadedMap, MapFormat};
 pub use list::{OccupancyList, OccupancyStats};
 pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};

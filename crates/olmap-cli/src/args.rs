@@ -1,0 +1,59 @@
+//! Argument helpers shared by the subcommands.
+
+use std::io::IsTerminal;
+
+use anyhow::{bail, Context};
+use indicatif::{ProgressBar, ProgressStyle};
+use olmap::geometry::Pose;
+
+/// Parses `N` comma-separated finite numbers.
+pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{what}: '{s}' is not a comma-separated list of numbers"))?;
+    if v.len() != N || v.iter().any(|x| !x.is_finite()) {
+        bail!("{what}: expected {N} finite numbers separated by commas, got '{s}'");
+    }
+    Ok(v.try_into().expect("length checked"))
+}
+
+/// Parses a pose `x,y,z,yaw,pitch,roll` (metres, degrees).
+pub fn parse_pose(s: &str, what: &str) -> anyhow::Result<Pose> {
+    let v = parse_numbers::<6>(s, what)?;
+    Ok(Pose::from_xyz_ypr(
+        v[0],
+        v[1],
+        v[2],
+        v[3].to_radians(),
+        v[4].to_radians(),
+        v[5].to_radians(),
+    ))
+}
+
+/// A progress bar with ETA on stderr, hidden when stderr is not a terminal or `quiet`.
+pub fn progress(len: u64, what: &str, quiet: bool) -> ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} ({elapsed}, eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+/// Sets the number of worker threads (0: one per core).
+pub fn set_threads(threads: usize) -> anyhow::Result<()> {
+    if threads > 0 {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global()
+            .context("cannot set the number of threads")?;
+    }
+    Ok(())
+}
