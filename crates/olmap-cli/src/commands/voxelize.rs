@@ -8,7 +8,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use olmap::geometry::{Pose, PoseList};
 use olmap::io::{self, ReadOptions};
-use olmap::occupancy::{self, InsertStats, OccupancyList, SensorModel, MAX_COUNT};
+use olmap::occupancy::{self, InsertStats, OccupancyList, PositionBuckets, SensorModel, MAX_COUNT};
 
 use crate::args::{parse_pose, progress, set_threads};
 
@@ -52,6 +52,10 @@ pub struct VoxelizeArgs {
     /// One pose for all clouds: `x,y,z,yaw,pitch,roll` (metres, degrees).
     #[arg(long, value_name = "X,Y,Z,YAW,PITCH,ROLL", allow_hyphen_values = true)]
     pub pose: Option<String>,
+    /// Position buckets: skip a cloud whose sensor position is within this distance (metres)
+    /// of a cloud already integrated (thesis §3.3.3; 0 keeps every cloud).
+    #[arg(long, default_value_t = 0.0, value_name = "M")]
+    pub bucket_radius: f64,
     /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
     #[arg(long = "3dtk-valid")]
     pub threedtk_valid: bool,
@@ -133,8 +137,15 @@ pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
     let bar = progress(a.clouds.len() as u64, "voxelize", a.json);
     let mut total = InsertStats::default();
     let mut points = 0usize;
+    let mut buckets = PositionBuckets::new(a.bucket_radius)?;
+    let mut skipped_clouds = 0usize;
     for (path, pose) in a.clouds.iter().zip(&poses) {
         let cloud = io::read_cloud_with(path, &read)?.cloud;
+        if a.bucket_radius > 0.0 && !buckets.admit(&pose.transform_point(&cloud.origin())) {
+            skipped_clouds += 1;
+            bar.inc(1);
+            continue;
+        }
         points += cloud.len();
         if a.ray_trace {
             let s = map
@@ -159,6 +170,7 @@ pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
         let v = serde_json::json!({
             "output": a.output.display().to_string(),
             "clouds": a.clouds.len(),
+            "clouds_skipped_by_buckets": skipped_clouds,
             "points": points,
             "resolution": a.resolution,
             "ray_trace": a.ray_trace,
@@ -181,6 +193,12 @@ pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
             seconds,
             a.output.display()
         );
+        if skipped_clouds > 0 {
+            println!(
+                "  {skipped_clouds} clouds skipped: taken within {} m of an earlier one",
+                a.bucket_radius
+            );
+        }
         if total.skipped > 0 {
             println!(
                 "  {} points skipped (non-finite or outside the map's key range)",

@@ -3,11 +3,16 @@
 //! * [`OccupancyList`]: voxel key -> count, only positive counts stored; built from clouds
 //!   (endpoints) or by ray tracing scans ([`OccupancyList::insert_scan`], thesis
 //!   Algorithm 2 with exact voxel traversal [`VoxelRay`]);
-//! * queries, filters, merging, transforms, statistics and map entropy (thesis (7.4)).
+//! * queries, filters, merging, transforms, statistics and map entropy (thesis (7.4));
+//! * [`PositionBuckets`] (thesis §3.3.3): integrate scans from new positions only;
+//! * downsampling (thesis Algorithm 4) and the incremental [`Pyramid`];
+//! * overlap of a scan with a map (thesis (5.7)), plain and weighted;
+//! * files: `.olm` (olmap's exact binary format) via [`read_map`] / [`write_map`].
 //!
 //! Memory: one `u64` per hash slot holds the key and the count (see the `packed` layout),
 //! 10-15 bytes per stored voxel.
 
+mod buckets;
 mod file;
 mod list;
 mod olm;
@@ -17,6 +22,7 @@ mod pyramid;
 mod raytrace;
 mod table;
 
+pub use buckets::PositionBuckets;
 pub use file::{read_map, write_map, LoadedMap, MapFormat};
 pub use list::{OccupancyList, OccupancyStats};
 pub use olm::OLM_MAGIC;
