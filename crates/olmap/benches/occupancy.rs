@@ -129,3 +129,70 @@ fn endpoints_only(bencher: Bencher, case: &str) {
         map
     });
 }
+
+/// A ~200,000-voxel map and a 5,000-voxel scan at 0.02 m, both from real scans: the map is
+/// the 3DTK scans 000-002 at their reference poses plus OctoMap's scan.dat (endpoints), the
+/// scan every k-th voxel of 3DTK scan001.
+fn overlap_problem() -> Option<&'static (OccupancyList, OccupancyList, Pose)> {
+    static P: OnceLock<Option<(OccupancyList, OccupancyList, Pose)>> = OnceLock::new();
+    P.get_or_init(|| {
+        let sets = datasets();
+        let tdk = &sets.iter().find(|d| d.0 == "3dtk_000-002")?.1;
+        let dat = &sets.iter().find(|d| d.0 == "scan.dat")?.1;
+        let res = 0.02;
+        let mut map = OccupancyList::new(res).unwrap();
+        for (cloud, pose) in tdk.iter().chain(dat) {
+            map.add_points(cloud, pose, 1);
+        }
+        let full = OccupancyList::from_cloud(&tdk[1].0, res).unwrap();
+        let sorted = full.sorted();
+        let step = sorted.len() / 5000;
+        let mut scan = OccupancyList::new(res).unwrap();
+        for (k, c) in sorted.iter().step_by(step).take(5000) {
+            scan.set(*k, *c as u32).unwrap();
+        }
+        eprintln!(
+            "[overlap] map {} voxels, scan {} voxels",
+            map.len(),
+            scan.len()
+        );
+        Some((map, scan, tdk[1].1))
+    })
+    .as_ref()
+}
+
+/// Overlap evaluations (5,000-voxel scan against the ~200,000-voxel map), one thread.
+#[divan::bench(sample_count = 10, sample_size = 20)]
+fn overlap_5k_scan_200k_map(bencher: Bencher) {
+    let Some((map, scan, pose)) = overlap_problem() else {
+        return;
+    };
+    let mut i = 0u32;
+    bencher.counter(ItemsCount::new(1usize)).bench_local(|| {
+        i = i.wrapping_add(1);
+        // A slightly different pose each call, as in a search.
+        let d = Pose::from_xyz_ypr(
+            0.01 * (i % 7) as f64,
+            0.0,
+            0.0,
+            0.001 * (i % 5) as f64,
+            0.0,
+            0.0,
+        );
+        map.overlap(scan, &(d * *pose)).unwrap()
+    });
+}
+
+/// The same evaluations with the scan pre-rotated: integer key offsets only (§5.3.3).
+#[divan::bench(sample_count = 10, sample_size = 20)]
+fn overlap_keys_5k_scan_200k_map(bencher: Bencher) {
+    let Some((map, scan, pose)) = overlap_problem() else {
+        return;
+    };
+    let keys = scan.transformed_keys(pose);
+    let mut i = 0i32;
+    bencher.counter(ItemsCount::new(1usize)).bench_local(|| {
+        i = i.wrapping_add(1);
+        map.overlap_keys(&keys, [i % 7 - 3, i % 5 - 2, 0])
+    });
+}
