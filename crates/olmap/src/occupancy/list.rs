@@ -374,3 +374,65 @@ impl OccupancyList {
         Ok((self.len() as f64 - cells) * p0 * p0.ln() + listed)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> OccupancyList {
+        let mut l = OccupancyList::new(0.1).unwrap();
+        l.set(VoxelKey::new(0, 0, 0), 1).unwrap();
+        l.set(VoxelKey::new(10, 0, 25), 3).unwrap();
+        l.set(VoxelKey::new(-5, 2, 28), 2).unwrap();
+        l
+    }
+
+    #[test]
+    fn filters() {
+        let l = sample();
+        assert_eq!(l.threshold(2).len(), 2);
+        // Sub-ceiling band 2.3-2.9 m: centres at 2.55 and 2.85 m.
+        assert_eq!(l.z_slice(2.3, 2.9).len(), 2);
+        let b = Aabb::new(Point3::new(-1.0, -1.0, -1.0), Point3::new(0.5, 0.5, 0.5));
+        assert_eq!(l.crop(&b).sorted(), vec![(VoxelKey::new(0, 0, 0), 1)]);
+        let s = l.stats();
+        assert_eq!((s.voxels, s.total_count, s.max_count), (3, 6, 3));
+        let bb = s.bbox.unwrap();
+        assert!((bb.min.x + 0.5).abs() < 1e-12 && (bb.max.z - 2.9).abs() < 1e-12);
+    }
+
+    #[test]
+    fn transform_moves_voxel_centres() {
+        let l = sample();
+        let t = Pose::from_xyz_ypr(1.0, 0.0, 0.0, std::f64::consts::FRAC_PI_2, 0.0, 0.0);
+        let m = l.transformed(&t);
+        assert_eq!(m.len(), 3);
+        // Centre (1.05, 0.05, 2.55) turns to (-0.05, 1.05, 2.55), then moves to (0.95, 1.05, 2.55).
+        assert_eq!(m.count(VoxelKey::new(9, 10, 25)), 3);
+        assert_eq!(l.transformed(&Pose::identity()), l);
+    }
+
+    #[test]
+    fn entropy_follows_the_thesis_formula() {
+        let l = sample();
+        // Every listed voxel contributes -p ln p with p = 1 / (e^-m + 1).
+        let listed: f64 = [1.0f64, 3.0, 2.0]
+            .iter()
+            .map(|m| {
+                let p = 1.0 / ((-m).exp() + 1.0);
+                -p * p.ln()
+            })
+            .sum();
+        let p0: f64 = 0.5;
+        let v = 1000.0 * 0.001; // 1000 cells of 0.1 m
+        let h = l.entropy(p0, Some(v), 1.0).unwrap();
+        let expected = -(1000.0 - 3.0) * p0 * p0.ln() + listed;
+        assert!((h - expected).abs() < 1e-9, "{h} vs {expected}");
+        assert!(l.entropy(0.0, None, 1.0).is_err());
+        assert!(l.entropy(0.5, Some(-1.0), 1.0).is_err());
+        // More confident voxels (higher counts) lower the entropy of the listed part.
+        let mut sure = l.clone();
+        sure.merge(&l).unwrap();
+        assert!(sure.entropy(p0, Some(v), 1.0).unwrap() < h);
+    }
+}
