@@ -128,6 +128,13 @@ fn demo_writes_files_that_read_back() {
     let scan_points = v["scan_points"].as_u64().unwrap();
     // Every ray of the closed room hits something: 720 azimuths x 81 elevations.
     assert_eq!(scan_points, 720 * 81);
+    // The room's walls as voxels: far fewer than the points, and the map file reads back.
+    let voxels = v["map"]["voxels"].as_u64().unwrap();
+    assert!(voxels > 1000 && voxels < scan_points);
+    let map = olmap::occupancy::read_map(v["map"]["path"].as_str().unwrap())
+        .unwrap()
+        .map;
+    assert_eq!(map.len() as u64, voxels);
     for f in files {
         let p = f["path"].as_str().unwrap();
         let loaded = olmap::io::read_cloud(p).unwrap();

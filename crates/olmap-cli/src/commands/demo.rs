@@ -14,7 +14,9 @@ use anyhow::{ensure, Context};
 use clap::Args;
 use nalgebra::{Point3, Vector3};
 use olmap::cloud::PointCloud;
+use olmap::geometry::Pose;
 use olmap::io::{self, PcdEncoding, PlyEncoding, WriteOptions};
+use olmap::occupancy::{self, OccupancyList, SensorModel};
 
 use crate::report::cloud_text;
 
@@ -139,6 +141,17 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         let bytes = std::fs::metadata(&path)?.len();
         files.push((path, back, bytes));
     }
+    // The scan as an occupancy list: ray traced at 5 cm.
+    let mut map = OccupancyList::new(0.05)?;
+    let insert = map.insert_scan(&scan, &Pose::identity(), &SensorModel::default())?;
+    let map_path = args.out.join("room.olm");
+    occupancy::write_map(&map_path, &map)?;
+    let reread = occupancy::read_map(&map_path)?.map;
+    ensure!(
+        reread == map,
+        "{}: the map read back differs",
+        map_path.display()
+    );
     let seconds = start.elapsed().as_secs_f64();
     if args.json {
         let list: Vec<_> = files
@@ -152,7 +165,18 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
                 })
             })
             .collect();
-        let v = serde_json::json!({ "scan_points": scan.len(), "voxel_points": down.len(), "files": list, "seconds": seconds });
+        let v = serde_json::json!({
+            "scan_points": scan.len(),
+            "voxel_points": down.len(),
+            "files": list,
+            "map": {
+                "path": map_path.display().to_string(),
+                "resolution": map.resolution(),
+                "voxels": map.len(),
+                "voxels_traversed": insert.voxels_traversed,
+            },
+            "seconds": seconds,
+        });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
@@ -168,6 +192,14 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
             );
             println!("  {:<14}{bytes} bytes, read back identical\n", "file");
         }
+        println!(
+            "{}\n  occupancy list at {} m: {} voxels from {} rays ({} voxel steps traced), read back identical\n",
+            map_path.display(),
+            map.resolution(),
+            map.len(),
+            insert.rays,
+            insert.voxels_traversed
+        );
         println!("done in {seconds:.2} s; files in {}", args.out.display());
     }
     Ok(ExitCode::SUCCESS)
