@@ -23,6 +23,7 @@
 pub mod csv;
 pub mod kitti;
 pub mod lzf;
+pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
 pub mod scan_graph;
