@@ -24,6 +24,7 @@ pub mod crc32;
 pub mod csv;
 pub mod kitti;
 pub mod lzf;
+pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
 pub mod scan_graph;
