@@ -230,3 +230,66 @@ fn voxelize_info_export_merge() {
         .iter()
         .all(|(k, c)| b.count(k) == (2 * c).min(olmap::occupancy::MAX_COUNT)));
 }
+
+#[test]
+fn octomap_bt_read_write_and_octomap_accepts_ours() {
+    let Some(d) = data() else { return };
+    let bt = d.join("octomap_share_data/geb079.bt");
+    let v = json(&olmap(&["info", "--json", bt.to_str().unwrap()]));
+    // Data README §2.4: 532,566 nodes, 143,729 occupied leaves (137,745 at 0.08 m, 5,983 at
+    // 0.16 m, 1 at 0.32 m) -> 137,745 + 8 x 5,983 + 64 voxels at 0.08 m; 284,415 free leaves.
+    assert_eq!(v[0]["octree"]["nodes"], 532_566);
+    assert_eq!(v[0]["octree"]["occupied_leaves"], 143_729);
+    assert_eq!(v[0]["octree"]["free_leaves"], 284_415);
+    assert_eq!(v[0]["voxels"], 137_745 + 8 * 5_983 + 64);
+    assert_eq!(v[0]["resolution"], 0.08);
+    let dir = tempfile::tempdir().unwrap();
+    let olm = dir.path().join("g.olm");
+    let ours = dir.path().join("g.bt");
+    assert!(
+        olmap(&["export", bt.to_str().unwrap(), "-o", olm.to_str().unwrap()])
+            .status
+            .success()
+    );
+    assert!(olmap(&[
+        "export",
+        olm.to_str().unwrap(),
+        "-o",
+        ours.to_str().unwrap()
+    ])
+    .status
+    .success());
+    let a = olmap::occupancy::read_map(&bt).unwrap();
+    let b = olmap::occupancy::read_map(&ours).unwrap();
+    assert_eq!(a.map.sorted(), b.map.sorted());
+    let written = b.bt.unwrap();
+    assert_eq!(
+        written.occupied_leaves, 143_729,
+        "pruned as far as OctoMap's own tree"
+    );
+    assert_eq!(written.free_leaves, 0);
+    // OctoMap's own tools (Debian octomap-tools, installed by .ci/run when possible) must
+    // read our file and count the same nodes.
+    let ot = dir.path().join("g.ot");
+    match Command::new("convert_octree").arg(&ours).arg(&ot).output() {
+        Ok(out) => {
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let cmp = Command::new("compare_octrees")
+                .arg(&ot)
+                .arg(&ot)
+                .output()
+                .unwrap();
+            let text = String::from_utf8_lossy(&cmp.stdout).to_string()
+                + &String::from_utf8_lossy(&cmp.stderr);
+            assert!(
+                text.contains(&format!("Done ({} nodes)", written.nodes)),
+                "{text}"
+            );
+        }
+        Err(_) => eprintln!("octomap-tools not installed: the OctoMap cross-check is skipped"),
+    }
+}

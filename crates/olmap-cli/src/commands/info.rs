@@ -14,7 +14,7 @@ use crate::report::{cloud_json, cloud_text, map_json, map_text};
 #[derive(Args)]
 pub struct InfoArgs {
     /// Point-cloud files (.pcd .ply .xyz .txt .dat .asc .pts .3d .csv .bin .graph, optionally
-    /// .bz2) and map files (.olm). Every file is described even when an earlier one fails.
+    /// .bz2) and map files (.olm, OctoMap .bt). Every file is described even when an earlier one fails.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// Read every file as this format (pcd, ply, xyz, 3d, csv, kitti, graph) instead of
@@ -52,9 +52,24 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
                     let stats = loaded.map.stats();
                     let name = loaded.format.name();
                     if args.json {
-                        json.push(map_json(&shown, name, &stats));
+                        let mut v = map_json(&shown, name, &stats);
+                        if let Some(bt) = &loaded.bt {
+                            v["octree"] = serde_json::json!({
+                                "nodes": bt.nodes,
+                                "occupied_leaves": bt.occupied_leaves,
+                                "free_leaves": bt.free_leaves,
+                                "occupied_leaves_by_depth": bt.occupied_leaves_by_depth,
+                            });
+                        }
+                        json.push(v);
                     } else {
                         print!("{}", map_text(&shown, name, &stats));
+                        if let Some(bt) = &loaded.bt {
+                            println!(
+                                "  {:<14}{} nodes, {} occupied and {} free leaves",
+                                "octree", bt.nodes, bt.occupied_leaves, bt.free_leaves
+                            );
+                        }
                     }
                 }
                 Err(e) => {

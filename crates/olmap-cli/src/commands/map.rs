@@ -11,9 +11,9 @@ use olmap::occupancy::{self, MapFormat};
 /// Arguments of `olmap export`.
 #[derive(Args)]
 pub struct ExportArgs {
-    /// Input map (.olm).
+    /// Input map (.olm or OctoMap .bt).
     pub map: PathBuf,
-    /// Output: a map file (.olm), or a point cloud of voxel centres with counts as intensity
+    /// Output: a map file (.olm, .bt), or a point cloud of voxel centres with counts as intensity
     /// (.ply .pcd .xyz .csv ...).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -37,10 +37,10 @@ pub fn export(a: &ExportArgs) -> anyhow::Result<ExitCode> {
 /// Arguments of `olmap merge`.
 #[derive(Args)]
 pub struct MergeArgs {
-    /// Maps to merge (same resolution); counts add.
+    /// Maps to merge (.olm or .bt, same resolution); counts add.
     #[arg(required = true, num_args = 2..)]
     pub maps: Vec<PathBuf>,
-    /// Output map (.olm).
+    /// Output map (.olm, or OctoMap .bt: occupancy only).
     #[arg(short, long)]
     pub output: PathBuf,
 }
@@ -49,7 +49,7 @@ pub struct MergeArgs {
 pub fn merge(a: &MergeArgs) -> anyhow::Result<ExitCode> {
     if MapFormat::from_path(&a.output).is_none() {
         bail!(
-            "{}: the output must be a map file (.olm)",
+            "{}: the output must be a map file (.olm or .bt)",
             a.output.display()
         );
     }

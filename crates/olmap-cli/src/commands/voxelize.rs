@@ -23,7 +23,7 @@ pub struct VoxelizeArgs {
     /// Point-cloud files (any format `olmap info` reads), in the sensor frame.
     #[arg(required = true)]
     pub clouds: Vec<PathBuf>,
-    /// Output map (.olm).
+    /// Output map (.olm, or OctoMap .bt: occupancy only).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Voxel edge, metres.
@@ -118,7 +118,7 @@ pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
     let start = Instant::now();
     if occupancy::MapFormat::from_path(&a.output).is_none() {
         bail!(
-            "{}: the output must be a map file (.olm)",
+            "{}: the output must be a map file (.olm or .bt)",
             a.output.display()
         );
     }

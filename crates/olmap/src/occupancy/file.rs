@@ -4,12 +4,15 @@ use std::path::Path;
 
 use super::list::OccupancyList;
 use crate::error::{Error, Result};
+use crate::io::octomap_bt::{self, BtStats};
 
 /// The map file formats olmap knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MapFormat {
     /// olmap's `.olm` (exact counts).
     Olm,
+    /// OctoMap's binary octree `.bt` (occupied or not: counts are read as 1 and not written).
+    OctomapBt,
 }
 
 impl MapFormat {
@@ -18,6 +21,7 @@ impl MapFormat {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
             "olm" => Some(MapFormat::Olm),
+            "bt" => Some(MapFormat::OctomapBt),
             _ => None,
         }
     }
@@ -26,6 +30,7 @@ impl MapFormat {
     pub fn name(self) -> &'static str {
         match self {
             MapFormat::Olm => "olmap .olm",
+            MapFormat::OctomapBt => "OctoMap .bt",
         }
     }
 }
@@ -37,12 +42,18 @@ pub struct LoadedMap {
     pub map: OccupancyList,
     /// The file's format.
     pub format: MapFormat,
+    /// For `.bt` files: the tree's node and leaf counts.
+    pub bt: Option<BtStats>,
 }
+
+/// The most voxels a `.bt` file may expand to when read (8 bytes each in a `Vec` while
+/// reading, 10-15 bytes in the map): 100 million.
+pub const MAX_BT_VOXELS: usize = 100_000_000;
 
 fn unknown(path: &Path) -> Error {
     Error::UnknownFormat {
         path: path.to_path_buf(),
-        reason: "not a map file; known map extensions: .olm".into(),
+        reason: "not a map file; known map extensions: .olm .bt".into(),
     }
 }
 
@@ -50,18 +61,40 @@ fn unknown(path: &Path) -> Error {
 pub fn read_map(path: impl AsRef<Path>) -> Result<LoadedMap> {
     let path = path.as_ref();
     let format = MapFormat::from_path(path).ok_or_else(|| unknown(path))?;
-    let map = match format {
-        MapFormat::Olm => OccupancyList::read_olm_path(path)?,
-    };
-    Ok(LoadedMap { map, format })
+    match format {
+        MapFormat::Olm => Ok(LoadedMap {
+            map: OccupancyList::read_olm_path(path)?,
+            format,
+            bt: None,
+        }),
+        MapFormat::OctomapBt => {
+            let tree = octomap_bt::read_path(path, MAX_BT_VOXELS)?;
+            let mut map = OccupancyList::with_capacity(tree.resolution, tree.occupied.len())?;
+            for k in &tree.occupied {
+                map.set(*k, 1)
+                    .expect("OctoMap keys are within olmap's range");
+            }
+            Ok(LoadedMap {
+                map,
+                format,
+                bt: Some(tree.stats),
+            })
+        }
+    }
 }
 
-/// Writes a map file (format from the extension), atomically.
+/// Writes a map file (format from the extension), atomically. `.bt` keeps occupancy only
+/// (every stored voxel is an occupied leaf; the tree is pruned) and needs keys within
+/// ±32,768 voxels of the origin.
 pub fn write_map(path: impl AsRef<Path>, map: &OccupancyList) -> Result<MapFormat> {
     let path = path.as_ref();
     let format = MapFormat::from_path(path).ok_or_else(|| unknown(path))?;
     match format {
         MapFormat::Olm => map.write_olm_path(path)?,
+        MapFormat::OctomapBt => {
+            let keys: Vec<_> = map.sorted().into_iter().map(|(k, _)| k).collect();
+            octomap_bt::write_path(path, map.resolution(), &keys)?;
+        }
     }
     Ok(format)
 }

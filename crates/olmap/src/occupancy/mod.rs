@@ -7,7 +7,8 @@
 //! * [`PositionBuckets`] (thesis §3.3.3): integrate scans from new positions only;
 //! * downsampling (thesis Algorithm 4) and the incremental [`Pyramid`];
 //! * overlap of a scan with a map (thesis (5.7)), plain and weighted;
-//! * files: `.olm` (olmap's exact binary format) via [`read_map`] / [`write_map`].
+//! * files: `.olm` (olmap's exact binary format) and OctoMap `.bt` via [`read_map`] /
+//!   [`write_map`].
 //!
 //! Memory: one `u64` per hash slot holds the key and the count (see the `packed` layout),
 //! 10-15 bytes per stored voxel.
@@ -23,7 +24,7 @@ mod raytrace;
 mod table;
 
 pub use buckets::PositionBuckets;
-pub use file::{read_map, write_map, LoadedMap, MapFormat};
+pub use file::{read_map, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
 pub use list::{OccupancyList, OccupancyStats};
 pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
