@@ -9,6 +9,18 @@ fn aabb_json(b: &Aabb) -> Value {
     json!({ "min": [b.min.x, b.min.y, b.min.z], "max": [b.max.x, b.max.y, b.max.z] })
 }
 
+/// The two text lines of a bounding box.
+fn bbox_lines(b: &Aabb, line: &mut impl FnMut(&str, String)) {
+    line(
+        "bbox min",
+        format!("({:.3}, {:.3}, {:.3}) m", b.min.x, b.min.y, b.min.z),
+    );
+    line(
+        "bbox max",
+        format!("({:.3}, {:.3}, {:.3}) m", b.max.x, b.max.y, b.max.z),
+    );
+}
+
 /// The JSON object describing a read cloud.
 pub fn cloud_json(path: &str, stats: &CloudStats, report: &ReadReport, origin: [f64; 3]) -> Value {
     json!({
@@ -76,14 +88,7 @@ pub fn cloud_text(path: &str, stats: &CloudStats, report: &ReadReport, origin: [
         format!("({:.3}, {:.3}, {:.3}) m", origin[0], origin[1], origin[2]),
     );
     if let Some(b) = &stats.bbox {
-        line(
-            "bbox min",
-            format!("({:.3}, {:.3}, {:.3}) m", b.min.x, b.min.y, b.min.z),
-        );
-        line(
-            "bbox max",
-            format!("({:.3}, {:.3}, {:.3}) m", b.max.x, b.max.y, b.max.z),
-        );
+        bbox_lines(b, &mut line);
         let e = b.extent();
         line("extent", format!("{:.3} x {:.3} x {:.3} m", e.x, e.y, e.z));
     }
@@ -134,14 +139,7 @@ pub fn map_text(path: &str, format: &str, s: &olmap::occupancy::OccupancyStats) 
     line("resolution", format!("{} m", s.resolution));
     line("voxels", s.voxels.to_string());
     if let Some(b) = &s.bbox {
-        line(
-            "bbox min",
-            format!("({:.3}, {:.3}, {:.3}) m", b.min.x, b.min.y, b.min.z),
-        );
-        line(
-            "bbox max",
-            format!("({:.3}, {:.3}, {:.3}) m", b.max.x, b.max.y, b.max.z),
-        );
+        bbox_lines(b, &mut line);
     }
     line(
         "counts",

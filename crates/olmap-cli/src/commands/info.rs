@@ -1,12 +1,13 @@
 //! `olmap info`: describe point-cloud files.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args;
 use olmap::io::{self, CloudFormat, ReadOptions};
 
 use olmap::occupancy::{self, MapFormat};
+use serde_json::Value;
 
 use crate::report::{cloud_json, cloud_text, map_json, map_text};
 
@@ -36,6 +37,44 @@ pub fn parse_format(s: &str) -> Result<CloudFormat, String> {
         .ok_or_else(|| format!("unknown format '{s}'; known: pcd, ply, xyz, 3d, csv, kitti, graph"))
 }
 
+/// JSON and text descriptions of a map file.
+fn describe_map(path: &Path, shown: &str) -> olmap::Result<(Value, String)> {
+    let loaded = occupancy::read_map(path)?;
+    let stats = loaded.map.stats();
+    let name = loaded.format.name();
+    let mut v = map_json(shown, name, &stats);
+    let mut text = map_text(shown, name, &stats);
+    if let Some(bt) = &loaded.bt {
+        v["octree"] = serde_json::json!({
+            "nodes": bt.nodes,
+            "occupied_leaves": bt.occupied_leaves,
+            "free_leaves": bt.free_leaves,
+            "occupied_leaves_by_depth": bt.occupied_leaves_by_depth,
+        });
+        text.push_str(&format!(
+            "  {:<14}{} nodes, {} occupied and {} free leaves\n",
+            "octree", bt.nodes, bt.occupied_leaves, bt.free_leaves
+        ));
+    }
+    Ok((v, text))
+}
+
+/// JSON and text descriptions of a point-cloud file.
+fn describe_cloud(
+    path: &Path,
+    shown: &str,
+    options: &ReadOptions,
+) -> olmap::Result<(Value, String)> {
+    let loaded = io::read_cloud_with(path, options)?;
+    let stats = loaded.cloud.stats();
+    let o = loaded.cloud.origin();
+    let origin = [o.x, o.y, o.z];
+    Ok((
+        cloud_json(shown, &stats, &loaded.report, origin),
+        cloud_text(shown, &stats, &loaded.report, origin),
+    ))
+}
+
 /// Runs the command.
 pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let options = ReadOptions {
@@ -46,54 +85,14 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let mut failed = false;
     for path in &args.files {
         let shown = path.display().to_string();
-        if MapFormat::from_path(path).is_some() {
-            match occupancy::read_map(path) {
-                Ok(loaded) => {
-                    let stats = loaded.map.stats();
-                    let name = loaded.format.name();
-                    if args.json {
-                        let mut v = map_json(&shown, name, &stats);
-                        if let Some(bt) = &loaded.bt {
-                            v["octree"] = serde_json::json!({
-                                "nodes": bt.nodes,
-                                "occupied_leaves": bt.occupied_leaves,
-                                "free_leaves": bt.free_leaves,
-                                "occupied_leaves_by_depth": bt.occupied_leaves_by_depth,
-                            });
-                        }
-                        json.push(v);
-                    } else {
-                        print!("{}", map_text(&shown, name, &stats));
-                        if let Some(bt) = &loaded.bt {
-                            println!(
-                                "  {:<14}{} nodes, {} occupied and {} free leaves",
-                                "octree", bt.nodes, bt.occupied_leaves, bt.free_leaves
-                            );
-                        }
-                    }
-                }
-                Err(e) => {
-                    failed = true;
-                    if args.json {
-                        json.push(serde_json::json!({ "path": shown, "error": e.to_string() }));
-                    } else {
-                        eprintln!("error: {e}");
-                    }
-                }
-            }
-            continue;
-        }
-        match io::read_cloud_with(path, &options) {
-            Ok(loaded) => {
-                let stats = loaded.cloud.stats();
-                let o = loaded.cloud.origin();
-                let origin = [o.x, o.y, o.z];
-                if args.json {
-                    json.push(cloud_json(&shown, &stats, &loaded.report, origin));
-                } else {
-                    print!("{}", cloud_text(&shown, &stats, &loaded.report, origin));
-                }
-            }
+        let described = if MapFormat::from_path(path).is_some() {
+            describe_map(path, &shown)
+        } else {
+            describe_cloud(path, &shown, &options)
+        };
+        match described {
+            Ok((v, _)) if args.json => json.push(v),
+            Ok((_, text)) => print!("{text}"),
             Err(e) => {
                 failed = true;
                 if args.json {
