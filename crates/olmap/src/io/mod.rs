@@ -22,6 +22,7 @@
 
 pub mod crc32;
 pub mod csv;
+pub(crate) mod cursor;
 pub mod kitti;
 pub mod lzf;
 pub mod octomap_bt;

@@ -17,6 +17,7 @@ use std::io::{BufRead, Write};
 
 use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 
+use super::cursor::ByteCursor;
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::{Location, ParseError};
@@ -33,34 +34,15 @@ pub struct ScanNode {
     pub cloud: PointCloud,
 }
 
-struct Cursor<'a> {
-    data: &'a [u8],
-    pos: usize,
+/// Reading the tagged vectors and poses of a ScanGraph.
+trait GraphValues {
+    fn tagged(&mut self, tag: u32, n: usize, what: &str) -> Result<[f64; 4], ParseError>;
+    fn pose(&mut self) -> Result<Pose, ParseError>;
 }
 
-impl<'a> Cursor<'a> {
-    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], ParseError> {
-        if self.data.len() - self.pos < n {
-            return Err(ParseError::Truncated(format!(
-                "{what} at byte {} needs {n} bytes, only {} left",
-                self.pos,
-                self.data.len() - self.pos
-            )));
-        }
-        let s = &self.data[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-    fn u32(&mut self, what: &str) -> Result<u32, ParseError> {
-        let b = self.take(4, what)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-    fn f64(&mut self, what: &str) -> Result<f64, ParseError> {
-        let b = self.take(8, what)?;
-        Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
-    }
+impl GraphValues for ByteCursor<'_> {
     fn tagged(&mut self, tag: u32, n: usize, what: &str) -> Result<[f64; 4], ParseError> {
-        let at = self.pos as u64;
+        let at = self.pos() as u64;
         let t = self.u32(what)?;
         if t != tag {
             return Err(ParseError::at(
@@ -75,7 +57,7 @@ impl<'a> Cursor<'a> {
         Ok(v)
     }
     fn pose(&mut self) -> Result<Pose, ParseError> {
-        let at = self.pos as u64;
+        let at = self.pos() as u64;
         let t = self.tagged(3, 3, "pose translation")?;
         let q = self.tagged(4, 4, "pose quaternion")?;
         let quat = Quaternion::new(q[0], q[1], q[2], q[3]);
@@ -102,19 +84,16 @@ pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadRepor
     }
     let mut report = ReadReport::new(CloudFormat::ScanGraph);
     report.fields = vec!["x".into(), "y".into(), "z".into()];
-    let mut c = Cursor {
-        data: &data,
-        pos: 0,
-    };
+    let mut c = ByteCursor::new(&data);
     let n_nodes = c.u32("node count")?;
     let mut nodes = Vec::new();
     for node in 0..n_nodes {
         let n_points = c.u32("point count")? as usize;
         // 28 bytes per point: refuse counts the file cannot hold before allocating.
-        if n_points.saturating_mul(28) > data.len() - c.pos {
+        if n_points.saturating_mul(28) > c.remaining() {
             return Err(ParseError::Truncated(format!(
                 "node {node} announces {n_points} points but only {} bytes are left",
-                data.len() - c.pos
+                c.remaining()
             )));
         }
         let mut points = Vec::with_capacity(n_points);
@@ -135,7 +114,7 @@ pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadRepor
     }
     let n_edges = c.u32("edge count")? as usize;
     // 4 + 4 + 60 (pose) + 8 bytes per edge.
-    if n_edges.saturating_mul(76) > data.len() - c.pos {
+    if n_edges.saturating_mul(76) > c.remaining() {
         return Err(ParseError::Truncated(format!(
             "{n_edges} edges announced, not enough bytes left"
         )));

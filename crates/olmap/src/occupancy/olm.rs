@@ -25,6 +25,7 @@ use super::packed::{entry_count, entry_key, MAX_COUNT};
 use super::table::VoxelTable;
 use crate::error::{Location, ParseError, Result};
 use crate::io::crc32::Crc32;
+use crate::io::cursor::ByteCursor;
 
 /// The 8 bytes every `.olm` file starts with.
 pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
@@ -37,42 +38,6 @@ fn put_varint(out: &mut Vec<u8>, mut v: u64) {
         v >>= 7;
     }
     out.push(v as u8);
-}
-
-struct Reader<'a> {
-    data: &'a [u8],
-    pos: usize,
-}
-
-impl Reader<'_> {
-    fn take(&mut self, n: usize, what: &str) -> Result<&[u8], ParseError> {
-        if self.data.len() - self.pos < n {
-            return Err(ParseError::Truncated(format!(
-                "{what} at byte {} needs {n} bytes, {} left",
-                self.pos,
-                self.data.len() - self.pos
-            )));
-        }
-        let s = &self.data[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-
-    fn varint(&mut self, what: &str) -> Result<u64, ParseError> {
-        let start = self.pos;
-        let mut v = 0u64;
-        for shift in (0..64).step_by(7) {
-            let b = *self.take(1, what)?.first().expect("one byte");
-            v |= ((b & 0x7F) as u64) << shift;
-            if b & 0x80 == 0 {
-                return Ok(v);
-            }
-        }
-        Err(ParseError::at(
-            Location::Byte(start as u64),
-            format!("{what}: varint longer than 10 bytes"),
-        ))
-    }
 }
 
 impl OccupancyList {
@@ -106,38 +71,35 @@ impl OccupancyList {
         if data.is_empty() {
             return Err(ParseError::Empty);
         }
-        let mut r = Reader {
-            data: &data,
-            pos: 0,
-        };
+        let mut r = ByteCursor::new(&data);
         if r.take(8, "magic")? != OLM_MAGIC {
             return Err(ParseError::at(
                 Location::Byte(0),
                 "not an .olm file (bad magic bytes)",
             ));
         }
-        let version = u32::from_le_bytes(r.take(4, "version")?.try_into().expect("4"));
+        let version = r.u32("version")?;
         if version != VERSION {
             return Err(ParseError::Unsupported(format!(
                 ".olm version {version} (this reader knows {VERSION})"
             )));
         }
-        let resolution = f64::from_le_bytes(r.take(8, "resolution")?.try_into().expect("8"));
+        let resolution = r.f64("resolution")?;
         check_resolution(resolution)
             .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
-        let n = u64::from_le_bytes(r.take(8, "voxel count")?.try_into().expect("8"));
+        let n = r.u64("voxel count")?;
         // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
-        if n.saturating_mul(2) > (data.len() - r.pos) as u64 {
+        if n.saturating_mul(2) > r.remaining() as u64 {
             return Err(ParseError::Truncated(format!(
                 "{n} voxels announced but only {} bytes follow",
-                data.len() - r.pos
+                r.remaining()
             )));
         }
         let n = n as usize;
         let mut keys = Vec::with_capacity(n);
         let mut key = 0u64;
         for i in 0..n {
-            let at = r.pos as u64;
+            let at = r.pos() as u64;
             let d = r.varint("key")?;
             if i > 0 && d == 0 {
                 return Err(ParseError::at(
@@ -155,7 +117,7 @@ impl OccupancyList {
         }
         let mut table = VoxelTable::with_capacity(n);
         for &k in &keys {
-            let at = r.pos as u64;
+            let at = r.pos() as u64;
             let c = r.varint("count")?;
             if c == 0 || c > MAX_COUNT as u64 {
                 return Err(ParseError::at(
@@ -165,8 +127,8 @@ impl OccupancyList {
             }
             table.update(k, |_| c as u16);
         }
-        let body_end = r.pos;
-        let stored = u32::from_le_bytes(r.take(4, "checksum")?.try_into().expect("4"));
+        let body_end = r.pos();
+        let stored = r.u32("checksum")?;
         let mut crc = Crc32::default();
         crc.update(&data[..body_end]);
         if crc.finish() != stored {
@@ -175,10 +137,10 @@ impl OccupancyList {
                 crc.finish()
             )));
         }
-        if r.pos != data.len() {
+        if r.remaining() != 0 {
             return Err(ParseError::Malformed(format!(
                 "{} unexpected bytes after the checksum",
-                data.len() - r.pos
+                r.remaining()
             )));
         }
         let mut list = OccupancyList::new(resolution).expect("checked");
