@@ -89,3 +89,28 @@ proptest! {
         let _ = io::read_cloud_from(&bytes[..], format, &ReadOptions { uos_valid_only: true, ..Default::default() });
     }
 }
+
+fn olm_sample() -> Vec<u8> {
+    let cloud = synthetic_cloud(300);
+    let map = olmap::occupancy::OccupancyList::from_cloud(&cloud, 0.5).unwrap();
+    let mut buf = Vec::new();
+    map.write_olm(&mut buf).unwrap();
+    buf
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn map_readers_never_panic(muts in proptest::collection::vec(mutation(), 1..6), noise in proptest::collection::vec(any::<u8>(), 0..512)) {
+        let mut bytes = olm_sample();
+        for m in &muts {
+            apply(&mut bytes, m);
+        }
+        let _ = olmap::occupancy::OccupancyList::read_olm(&bytes[..]);
+        let _ = olmap::occupancy::OccupancyList::read_olm(&noise[..]);
+        let mut bt = b"# Octomap OcTree binary file\nid OcTree\nsize 9\nres 0.1\ndata\n".to_vec();
+        bt.extend_from_slice(&noise);
+        let _ = olmap::io::octomap_bt::read(&bt[..], 1 << 20);
+    }
+}
