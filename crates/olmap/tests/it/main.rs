@@ -1,5 +1,6 @@
 //! Integration tests of the olmap library (one binary: it links once).
 
+mod align;
 mod bad_input;
 mod fuzz;
 mod occupancy;

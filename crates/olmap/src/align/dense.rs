@@ -1,0 +1,124 @@
+//! A dense bit grid over a map level's bounding box: membership in one array read.
+
+use crate::geometry::VoxelKey;
+use crate::occupancy::OccupancyList;
+
+/// Occupied cells of an occupancy list as bits over its bounding box of keys, for
+/// lookups without hashing (the search's inner loop). Built only when the box is small
+/// enough ([`DenseGrid::MAX_CELLS`]).
+#[derive(Debug, Clone)]
+pub(crate) struct DenseGrid {
+    min: [i64; 3],
+    dims: [u64; 3],
+    bits: Vec<u64>,
+}
+
+impl DenseGrid {
+    /// The largest box, in cells, worth a dense grid (2^31 bits = 256 MiB).
+    pub const MAX_CELLS: u64 = 1 << 31;
+
+    /// The grid of a list, or `None` when it is empty or its box is too large.
+    pub fn new(list: &OccupancyList) -> Option<Self> {
+        let mut lo = [i64::MAX; 3];
+        let mut hi = [i64::MIN; 3];
+        for (k, _) in list.iter() {
+            for (i, v) in [k.x, k.y, k.z].into_iter().enumerate() {
+                lo[i] = lo[i].min(v as i64);
+                hi[i] = hi[i].max(v as i64);
+            }
+        }
+        if list.is_empty() {
+            return None;
+        }
+        let mut g = Self::empty(lo, hi)?;
+        for (k, _) in list.iter() {
+            g.set(k.x as i64, k.y as i64, k.z as i64);
+        }
+        Some(g)
+    }
+
+    /// An all-clear grid over the key box `[lo, hi]`, or `None` when it is too large.
+    pub fn empty(lo: [i64; 3], hi: [i64; 3]) -> Option<Self> {
+        if (0..3).any(|i| hi[i] < lo[i]) {
+            return None;
+        }
+        let dims = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as u64);
+        let cells = dims[0].checked_mul(dims[1])?.checked_mul(dims[2])?;
+        if cells > Self::MAX_CELLS {
+            return None;
+        }
+        Some(DenseGrid {
+            min: lo,
+            dims,
+            bits: vec![0; cells.div_ceil(64) as usize],
+        })
+    }
+
+    /// Marks a cell (ignored outside the box).
+    #[inline]
+    pub fn set(&mut self, x: i64, y: i64, z: i64) {
+        if let Some(i) = self.index(x, y, z) {
+            self.bits[(i / 64) as usize] |= 1 << (i % 64);
+        }
+    }
+
+    /// Clears a cell (ignored outside the box).
+    #[inline]
+    pub fn clear(&mut self, x: i64, y: i64, z: i64) {
+        if let Some(i) = self.index(x, y, z) {
+            self.bits[(i / 64) as usize] &= !(1 << (i % 64));
+        }
+    }
+
+    #[inline]
+    fn index(&self, x: i64, y: i64, z: i64) -> Option<u64> {
+        let dx = (x - self.min[0]) as u64;
+        let dy = (y - self.min[1]) as u64;
+        let dz = (z - self.min[2]) as u64;
+        // Negative differences wrap to huge values and fail these tests too.
+        (dx < self.dims[0] && dy < self.dims[1] && dz < self.dims[2])
+            .then(|| (dx * self.dims[1] + dy) * self.dims[2] + dz)
+    }
+
+    /// Whether the cell is occupied.
+    #[inline]
+    pub fn contains(&self, x: i64, y: i64, z: i64) -> bool {
+        self.index(x, y, z)
+            .is_some_and(|i| self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1)
+    }
+
+    /// Bytes held.
+    #[allow(dead_code)]
+    pub fn memory_bytes(&self) -> usize {
+        self.bits.len() * 8
+    }
+}
+
+/// Membership test of a map level: dense bits when they fit, else the hash table.
+pub(crate) enum LevelLookup<'a> {
+    Dense(DenseGrid),
+    Hashed(&'a OccupancyList),
+}
+
+impl<'a> LevelLookup<'a> {
+    pub fn new(list: &'a OccupancyList) -> Self {
+        match DenseGrid::new(list) {
+            Some(g) => LevelLookup::Dense(g),
+            None => LevelLookup::Hashed(list),
+        }
+    }
+
+    #[inline]
+    pub fn contains(&self, x: i64, y: i64, z: i64) -> bool {
+        match self {
+            LevelLookup::Dense(g) => g.contains(x, y, z),
+            LevelLookup::Hashed(l) => {
+                let ok = |v: i64| i32::try_from(v).ok();
+                match (ok(x), ok(y), ok(z)) {
+                    (Some(x), Some(y), Some(z)) => l.count(VoxelKey::new(x, y, z)) > 0,
+                    _ => false,
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,589 @@
+//! The multi-resolution overlap search (thesis Algorithms 3, 5, 6; §6.4.2 Algorithm 8) and
+//! the exhaustive reference search (Algorithm 7).
+//!
+//! Poses live on a lattice that refines with the levels. At level `l` the cell is
+//! `resolution * 2^l` and the angular step `dθ = cell / R` (thesis (5.6)); a pose is
+//! `t = t0 + i * cell` (integer `i` per axis) and `angle = angle0 + j * dθ`. Halving the
+//! cell halves both steps, so a pose `(i, j)` at one level is `(2i, 2j)` at the next, and
+//! its resampling (Algorithm 6: ±half a cell, ±dθ) is `(2i + {-1, 0, 1}, 2j + {-1, 0, 1})`.
+//! Poses sharing a rotation are evaluated together: the scan's voxel centres are rotated
+//! once, `floor((R c + t0) / cell)` is computed once, and every translation of the group
+//! is an integer offset of those keys (§5.3.3). Groups run in parallel; every ordering
+//! and tie is resolved by the pose indices, so the result is the same for any number of
+//! threads.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::dense::{DenseGrid, LevelLookup};
+use super::params::{Dof, Region, SearchParams};
+use super::significance::significance;
+use super::target::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::geometry::Pose;
+use crate::occupancy::{OccupancyList, Pyramid};
+
+/// One pose of the lattice: rotation indices (yaw, pitch, roll) and translation indices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+struct Cand {
+    r: [i32; 3],
+    t: [i32; 3],
+}
+
+/// A scored pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    /// `T_target_source`.
+    pub pose: Pose,
+    /// Overlap (voxels) at the finest level.
+    pub overlap: u64,
+}
+
+/// What one level of the search did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LevelReport {
+    /// Level index (0 = finest).
+    pub level: usize,
+    /// Voxel edge at this level, metres.
+    pub resolution: f64,
+    /// Angular step at this level, radians.
+    pub angular_step: f64,
+    /// Scan voxels used at this level.
+    pub scan_voxels: usize,
+    /// Poses evaluated.
+    pub evaluated: usize,
+    /// Poses that passed `keep_ratio` of the best.
+    pub passed: usize,
+    /// Poses kept for the next level (after the cap).
+    pub survivors: usize,
+    /// The best overlap at this level.
+    pub best_overlap: u64,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// The result of a global search.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Alignment {
+    /// The best pose `T_target_source`.
+    pub pose: Pose,
+    /// Its overlap `|L ∩ M|` at the finest level (voxels).
+    pub overlap: u64,
+    /// Scan voxels at the finest level.
+    pub scan_voxels: u64,
+    /// `overlap / scan_voxels`.
+    pub overlap_fraction: f64,
+    /// z-score of the overlap under the hypergeometric model (5.4)-(5.5), with `V` the
+    /// target's bounding volume in finest cells.
+    pub significance: f64,
+    /// Distinct solutions: clusters of finest-level poses scoring at least `keep_ratio` of
+    /// the best, poses closer than `ambiguity_distance` / `ambiguity_angle` to a better one
+    /// joining its cluster (1 = unique).
+    pub ambiguity: usize,
+    /// The best few poses (one per cluster, best first).
+    pub candidates: Vec<Candidate>,
+    /// Per-level counts and timings, coarsest first.
+    pub levels: Vec<LevelReport>,
+    /// Whether the survivor cap cut a level.
+    pub guard_acted: bool,
+    /// Poses evaluated over all levels.
+    pub evaluated: usize,
+    /// Wall time of the whole search, seconds.
+    pub seconds: f64,
+}
+
+/// Everything the lattice needs to turn indices into poses.
+struct Lattice {
+    t0: Vector3<f64>,
+    angle0: [f64; 3],
+    finest: f64,
+    range: f64,
+    searched_t: [bool; 3],
+    searched_r: [bool; 3],
+}
+
+impl Lattice {
+    fn cell(&self, level: usize) -> f64 {
+        self.finest * (1u64 << level) as f64
+    }
+
+    fn dtheta(&self, level: usize) -> f64 {
+        self.cell(level) / self.range
+    }
+
+    fn angles(&self, c: &Cand, level: usize) -> [f64; 3] {
+        let d = self.dtheta(level);
+        [0, 1, 2].map(|i| self.angle0[i] + c.r[i] as f64 * d)
+    }
+
+    fn pose(&self, c: &Cand, level: usize) -> Pose {
+        let [yaw, pitch, roll] = self.angles(c, level);
+        let cell = self.cell(level);
+        let t = self.t0 + Vector3::new(c.t[0] as f64, c.t[1] as f64, c.t[2] as f64) * cell;
+        Pose::from_xyz_ypr(t.x, t.y, t.z, yaw, pitch, roll)
+    }
+
+    /// Algorithm 6: the poses around `c` at the next finer level.
+    fn children(&self, c: &Cand, out: &mut Vec<Cand>) {
+        let span = |searched: bool| if searched { -1..=1 } else { 0..=0 };
+        for a in span(self.searched_r[0]) {
+            for b in span(self.searched_r[1]) {
+                for g in span(self.searched_r[2]) {
+                    for x in span(self.searched_t[0]) {
+                        for y in span(self.searched_t[1]) {
+                            for z in span(self.searched_t[2]) {
+                                out.push(Cand {
+                                    r: [2 * c.r[0] + a, 2 * c.r[1] + b, 2 * c.r[2] + g],
+                                    t: [2 * c.t[0] + x, 2 * c.t[1] + y, 2 * c.t[2] + z],
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The scan and the target prepared for searching.
+struct Problem<'a> {
+    /// Scan voxel centres per level (sensor frame).
+    scan: Vec<Vec<Point3<f64>>>,
+    maps: Vec<LevelLookup<'a>>,
+    free: Vec<Option<&'a DenseGrid>>,
+    lattice: Lattice,
+    /// Finest-level target voxels and bounding volume in cells.
+    map_voxels: u64,
+    map_cells: f64,
+}
+
+fn check(params: &SearchParams) -> Result<()> {
+    let bad = |what: &str| Err(Error::InvalidArgument(what.to_string()));
+    if !(params.resolution.is_finite() && params.resolution > 0.0) {
+        return bad("search resolution must be > 0 m");
+    }
+    if params.levels == 0 || params.levels > 12 {
+        return bad("search levels must be 1 to 12");
+    }
+    if !(params.keep_ratio > 0.0 && params.keep_ratio <= 1.0) {
+        return bad("keep_ratio must be in (0, 1]");
+    }
+    if params.max_survivors == 0 || params.max_scan_voxels == 0 {
+        return bad("max_survivors and max_scan_voxels must be positive");
+    }
+    if !(params.max_range.is_finite() && params.max_range > 0.0) {
+        return bad("max_range must be > 0 m");
+    }
+    if let Region::Window { xy, z, yaw } = params.region {
+        if [xy, z, yaw].iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad("window half-widths must be >= 0");
+        }
+    }
+    if let Dof::SixDof { max_tilt } = params.dof {
+        if !(max_tilt.is_finite() && max_tilt >= 0.0) {
+            return bad("max_tilt must be >= 0");
+        }
+    }
+    Ok(())
+}
+
+/// Evenly spaced voxel centres (at most `max`) of a list, in key order.
+fn centres(list: &OccupancyList, max: usize) -> Vec<Point3<f64>> {
+    let sorted = list.sorted();
+    let step = sorted.len().div_ceil(max).max(1);
+    sorted
+        .iter()
+        .step_by(step)
+        .map(|(k, _)| list.center(*k))
+        .collect()
+}
+
+fn prepare<'a>(
+    source: &PointCloud,
+    target: &'a SearchTarget,
+    params: &SearchParams,
+) -> Result<Problem<'a>> {
+    check(params)?;
+    let pyramid = &target.pyramid;
+    let res = pyramid.base().resolution();
+    let scan_cloud = source.range_band(0.0, params.max_range);
+    if scan_cloud.is_empty() {
+        return Err(Error::InvalidArgument(format!(
+            "the source has no point within {} m of its sensor",
+            params.max_range
+        )));
+    }
+    let bbox = pyramid
+        .base()
+        .stats()
+        .bbox
+        .ok_or_else(|| Error::InvalidArgument("the target is empty".into()))?;
+    let base_scan = OccupancyList::from_cloud(&scan_cloud, res)?;
+    let mut scan = Vec::with_capacity(pyramid.levels());
+    for level in 0..pyramid.levels() {
+        let l = base_scan.downsample(1 << level)?;
+        scan.push(centres(&l, params.max_scan_voxels));
+    }
+    let reach = scan_cloud.stats().range.map_or(params.max_range, |r| r.max);
+    let range = reach.clamp(res, params.max_range);
+    let prior = &params.prior;
+    let pt = prior.translation();
+    let (yaw_p, pitch_p, roll_p) = prior.yaw_pitch_roll();
+    let tilt = match params.dof {
+        Dof::SixDof { max_tilt } => Some(max_tilt),
+        _ => None,
+    };
+    let search_z = !matches!(params.dof, Dof::XyYaw);
+    let (t0, angle0_yaw) = match params.region {
+        Region::Global => (
+            Vector3::new(
+                bbox.min.x,
+                bbox.min.y,
+                if search_z { bbox.min.z } else { pt.z },
+            ),
+            0.0,
+        ),
+        Region::Window { xy, z, yaw } => (
+            Vector3::new(pt.x - xy, pt.y - xy, if search_z { pt.z - z } else { pt.z }),
+            yaw_p - yaw,
+        ),
+    };
+    let lattice = Lattice {
+        t0,
+        angle0: [
+            angle0_yaw,
+            pitch_p - tilt.unwrap_or(0.0),
+            roll_p - tilt.unwrap_or(0.0),
+        ],
+        finest: res,
+        range,
+        searched_t: [true, true, search_z],
+        searched_r: [true, tilt.is_some(), tilt.is_some()],
+    };
+    let maps = (0..pyramid.levels())
+        .map(|l| LevelLookup::new(pyramid.level(l)))
+        .collect();
+    let e = bbox.extent();
+    Ok(Problem {
+        scan,
+        maps,
+        free: target.free.iter().map(Option::as_ref).collect(),
+        lattice,
+        map_voxels: pyramid.base().len() as u64,
+        map_cells: (e.x / res).max(1.0) * (e.y / res).max(1.0) * (e.z / res).max(1.0),
+    })
+}
+
+/// A scored pose: ranking score `2 * hits - conflicts`, the hits, the pose.
+type Scored = (i64, u32, Cand);
+
+/// Scores every candidate, in candidate order.
+fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
+    let l = &problem.lattice;
+    let cell = l.cell(level);
+    let scan = &problem.scan[level];
+    let map = &problem.maps[level];
+    let free = problem.free[level];
+    // Group by rotation (sorted: deterministic).
+    let mut groups: BTreeMap<[i32; 3], Vec<[i32; 3]>> = BTreeMap::new();
+    for c in cands {
+        groups.entry(c.r).or_default().push(c.t);
+    }
+    let groups: Vec<([i32; 3], Vec<[i32; 3]>)> = groups.into_iter().collect();
+    let scored: Vec<Vec<Scored>> = groups
+        .par_iter()
+        .map(|(r, ts)| {
+            let probe = Cand {
+                r: *r,
+                t: [0, 0, 0],
+            };
+            let [yaw, pitch, roll] = l.angles(&probe, level);
+            let rot = crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll);
+            let base: Vec<[i64; 3]> = scan
+                .iter()
+                .map(|c| {
+                    let p = rot * c.coords + l.t0;
+                    [
+                        (p.x / cell).floor() as i64,
+                        (p.y / cell).floor() as i64,
+                        (p.z / cell).floor() as i64,
+                    ]
+                })
+                .collect();
+            ts.iter()
+                .map(|t| {
+                    let (dx, dy, dz) = (t[0] as i64, t[1] as i64, t[2] as i64);
+                    let (mut hits, mut conflicts) = (0u32, 0i64);
+                    for b in &base {
+                        let (x, y, z) = (b[0] + dx, b[1] + dy, b[2] + dz);
+                        if map.contains(x, y, z) {
+                            hits += 1;
+                        } else if free.is_some_and(|f| f.contains(x, y, z)) {
+                            conflicts += 1;
+                        }
+                    }
+                    (2 * hits as i64 - conflicts, hits, Cand { r: *r, t: *t })
+                })
+                .collect()
+        })
+        .collect();
+    scored.into_iter().flatten().collect()
+}
+
+/// The lowest score that survives: `keep_ratio` of the best for a positive best, the same
+/// margin below it otherwise.
+fn threshold(best: i64, keep_ratio: f64) -> i64 {
+    best - ((1.0 - keep_ratio) * best.abs() as f64).floor() as i64
+}
+
+/// Best first; ties by lattice index (deterministic).
+fn rank(scored: &mut [Scored]) {
+    scored.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.2.cmp(&b.2)));
+}
+
+fn angle_between(a: &Pose, b: &Pose) -> f64 {
+    (a.rotation().inverse() * b.rotation()).angle()
+}
+
+fn finish(
+    problem: &Problem,
+    params: &SearchParams,
+    scored: &[Scored],
+    levels: Vec<LevelReport>,
+    start: Instant,
+) -> Alignment {
+    let l = &problem.lattice;
+    let (best_score, best_hits, best) = scored[0];
+    let cut = threshold(best_score, params.keep_ratio);
+    // Cluster the finest-level poses within keep_ratio of the best.
+    let mut heads: Vec<Candidate> = Vec::new();
+    for (_, hits, c) in scored.iter().take_while(|(s, _, _)| *s >= cut) {
+        let pose = l.pose(c, 0);
+        let near = heads.iter().any(|h| {
+            (h.pose.translation() - pose.translation()).norm() <= params.ambiguity_distance
+                && angle_between(&h.pose, &pose) <= params.ambiguity_angle
+        });
+        if !near {
+            heads.push(Candidate {
+                pose,
+                overlap: *hits as u64,
+            });
+        }
+    }
+    let n = problem.scan[0].len() as u64;
+    let overlap = best_hits as u64;
+    let ambiguity = heads.len().max(1);
+    heads.truncate(10);
+    if heads.is_empty() {
+        heads.push(Candidate {
+            pose: l.pose(&best, 0),
+            overlap,
+        });
+    }
+    let evaluated = levels.iter().map(|r| r.evaluated).sum();
+    let guard_acted = levels.iter().any(|r| r.survivors < r.passed);
+    Alignment {
+        pose: l.pose(&best, 0),
+        overlap,
+        scan_voxels: n,
+        overlap_fraction: if n > 0 {
+            overlap as f64 / n as f64
+        } else {
+            0.0
+        },
+        significance: significance(overlap, n, problem.map_voxels, problem.map_cells),
+        ambiguity,
+        candidates: heads,
+        levels,
+        guard_acted,
+        evaluated,
+        seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+fn level_report(
+    problem: &Problem,
+    level: usize,
+    evaluated: usize,
+    passed: usize,
+    survivors: usize,
+    best: u32,
+    t: Instant,
+) -> LevelReport {
+    LevelReport {
+        level,
+        resolution: problem.lattice.cell(level),
+        angular_step: problem.lattice.dtheta(level),
+        scan_voxels: problem.scan[level].len(),
+        evaluated,
+        passed,
+        survivors,
+        best_overlap: best as u64,
+        seconds: t.elapsed().as_secs_f64(),
+    }
+}
+
+/// Global alignment with no initial guess: the multi-resolution search of a `source` scan
+/// (sensor frame, its points) against a target. Returns `T_target_source`.
+///
+/// The target's pyramid fixes the finest resolution and the number of levels.
+pub fn global_search(
+    source: &PointCloud,
+    target: &SearchTarget,
+    params: &SearchParams,
+) -> Result<Alignment> {
+    let start = Instant::now();
+    let problem = prepare(source, target, params)?;
+    let top = target.pyramid.levels() - 1;
+    let mut cands = initial_candidates(&problem, params, &target.pyramid, top);
+    let mut reports = Vec::new();
+    for level in (0..=top).rev() {
+        let t = Instant::now();
+        let mut scored = evaluate(&problem, &cands, level);
+        rank(&mut scored);
+        let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
+        let cut = threshold(best, params.keep_ratio);
+        let passed = scored.iter().take_while(|s| s.0 >= cut).count();
+        if best_hits == 0 {
+            reports.push(level_report(&problem, level, scored.len(), passed, 0, 0, t));
+            return Ok(no_overlap(&problem, reports, start));
+        }
+        if level == 0 {
+            reports.push(level_report(
+                &problem,
+                level,
+                scored.len(),
+                passed,
+                passed,
+                best_hits,
+                t,
+            ));
+            return Ok(finish(&problem, params, &scored, reports, start));
+        }
+        let survivors = passed.min(params.max_survivors);
+        reports.push(level_report(
+            &problem,
+            level,
+            scored.len(),
+            passed,
+            survivors,
+            best_hits,
+            t,
+        ));
+        let mut next = Vec::with_capacity(survivors * 27);
+        for (_, _, c) in &scored[..survivors] {
+            problem.lattice.children(c, &mut next);
+        }
+        next.sort_unstable();
+        next.dedup();
+        cands = next;
+    }
+    unreachable!("the loop returns at level 0")
+}
+
+fn no_overlap(problem: &Problem, levels: Vec<LevelReport>, start: Instant) -> Alignment {
+    let evaluated = levels.iter().map(|r| r.evaluated).sum();
+    Alignment {
+        pose: Pose::identity(),
+        overlap: 0,
+        scan_voxels: problem.scan[0].len() as u64,
+        overlap_fraction: 0.0,
+        significance: 0.0,
+        ambiguity: 0,
+        candidates: Vec::new(),
+        levels,
+        guard_acted: false,
+        evaluated,
+        seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+/// The uniform start over the region at `level`.
+fn initial_candidates(
+    problem: &Problem,
+    params: &SearchParams,
+    target: &Pyramid,
+    level: usize,
+) -> Vec<Cand> {
+    let l = &problem.lattice;
+    let cell = l.cell(level);
+    let dth = l.dtheta(level);
+    let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
+    let ext = target
+        .base()
+        .stats()
+        .bbox
+        .map_or(Vector3::zeros(), |b| b.extent());
+    let (nx, ny, nz, nyaw) = match params.region {
+        Region::Global => (
+            count(ext.x, cell),
+            count(ext.y, cell),
+            count(ext.z, cell),
+            ((std::f64::consts::TAU / dth).ceil() as i32).max(1),
+        ),
+        Region::Window { xy, z, yaw } => (
+            count(2.0 * xy, cell),
+            count(2.0 * xy, cell),
+            count(2.0 * z, cell),
+            count(2.0 * yaw, dth),
+        ),
+    };
+    let nz = if l.searched_t[2] { nz } else { 1 };
+    let ntilt = match params.dof {
+        Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
+        _ => 1,
+    };
+    let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
+    for a in 0..nyaw {
+        for b in 0..ntilt {
+            for g in 0..ntilt {
+                for x in 0..nx {
+                    for y in 0..ny {
+                        for z in 0..nz {
+                            out.push(Cand {
+                                r: [a, b, g],
+                                t: [x, y, z],
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Algorithm 7: every lattice pose of the region at the finest level of `target`, the slow
+/// and sure reference for testing [`global_search`].
+pub fn exhaustive_search(
+    source: &PointCloud,
+    target: &SearchTarget,
+    params: &SearchParams,
+) -> Result<Alignment> {
+    let start = Instant::now();
+    let problem = prepare(source, target, params)?;
+    let t = Instant::now();
+    let cands = initial_candidates(&problem, params, &target.pyramid, 0);
+    let mut scored = evaluate(&problem, &cands, 0);
+    rank(&mut scored);
+    let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
+    let cut = threshold(best, params.keep_ratio);
+    let passed = scored.iter().take_while(|s| s.0 >= cut).count();
+    let reports = vec![level_report(
+        &problem,
+        0,
+        scored.len(),
+        passed,
+        passed,
+        best_hits,
+        t,
+    )];
+    if best_hits == 0 {
+        return Ok(no_overlap(&problem, reports, start));
+    }
+    Ok(finish(&problem, params, &scored, reports, start))
+}
