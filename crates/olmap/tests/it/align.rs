@@ -207,3 +207,34 @@ fn probe_free_space() {
         );
     }
 }
+
+#[test]
+#[ignore]
+fn probe_car() {
+    let Some(d) = data() else { return };
+    let c400 = io::read_cloud(d.join("libpointmatcher_car/car_cloud400.csv"))
+        .unwrap()
+        .cloud;
+    let c401 = io::read_cloud(d.join("libpointmatcher_car/car_cloud401.csv"))
+        .unwrap()
+        .cloud;
+    let gt = *olmap::io::csv::read_pose_table_path(d.join("libpointmatcher_car/carCloudList.csv"))
+        .unwrap()
+        .get("car_cloud401.csv")
+        .unwrap();
+    for (res, levels, surv) in [(0.2, 6, 50), (0.2, 5, 50)] {
+        let params = SearchParams {
+            resolution: res,
+            levels,
+            dof: Dof::six_dof(),
+            max_survivors: surv,
+            ..Default::default()
+        };
+        let a = align::align_clouds(&c401, &c400, &params).unwrap();
+        let e = PoseError::between(&a.pose, &gt);
+        eprintln!("res {res} levels {levels}: {:.3}s overlap {} / {} z {:.1} amb {} | t {:.3} rot {:.2} | {:?}", a.seconds, a.overlap, a.scan_voxels, a.significance, a.ambiguity, e.translation_m, e.rotation_deg, e);
+        for l in &a.levels {
+            eprintln!("   level {} res {:.2} dth {:.2}deg scan {} eval {} passed {} kept {} best {} {:.3}s", l.level, l.resolution, l.angular_step.to_degrees(), l.scan_voxels, l.evaluated, l.passed, l.survivors, l.best_overlap, l.seconds);
+        }
+    }
+}
