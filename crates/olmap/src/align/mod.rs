@@ -16,13 +16,28 @@ use crate::cloud::PointCloud;
 use crate::error::Result;
 
 /// Global search of `source` against a `target` cloud: the target is voxelised (endpoints)
-/// at `params.resolution` into a pyramid of `params.levels` levels with its free space ray
-/// traced from its origin, then [`global_search`] runs. Returns `T_target_source`.
+/// at `params.resolution` into a pyramid (levels: [`SearchParams::levels_for`]) with its
+/// free space ray traced from its origin, then [`global_search`] runs. Returns
+/// `T_target_source`.
 pub fn align_clouds(
     source: &PointCloud,
     target: &PointCloud,
     params: &SearchParams,
 ) -> Result<Alignment> {
-    let target = SearchTarget::from_cloud(target, params.resolution, params.levels)?;
+    let levels = levels_for_clouds(source, target, params);
+    let target = SearchTarget::from_cloud(target, params.resolution, levels)?;
     global_search(source, &target, params)
+}
+
+/// The number of levels for a source and a target cloud.
+pub(crate) fn levels_for_clouds(
+    source: &PointCloud,
+    target: &PointCloud,
+    params: &SearchParams,
+) -> usize {
+    let extent = target
+        .bounding_box()
+        .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
+    let range = source.stats().range.map_or(params.max_range, |r| r.max);
+    params.levels_for(extent, range)
 }

@@ -166,14 +166,14 @@ fn check(params: &SearchParams) -> Result<()> {
     if !(params.resolution.is_finite() && params.resolution > 0.0) {
         return bad("search resolution must be > 0 m");
     }
-    if params.levels == 0 || params.levels > 12 {
-        return bad("search levels must be 1 to 12");
+    if params.levels > 12 {
+        return bad("search levels must be 0 (automatic) to 12");
     }
     if !(params.keep_ratio > 0.0 && params.keep_ratio <= 1.0) {
         return bad("keep_ratio must be in (0, 1]");
     }
-    if params.max_survivors == 0 || params.max_scan_voxels == 0 {
-        return bad("max_survivors and max_scan_voxels must be positive");
+    if params.max_scan_voxels == 0 {
+        return bad("max_scan_voxels must be positive");
     }
     if !(params.max_range.is_finite() && params.max_range > 0.0) {
         return bad("max_range must be > 0 m");
@@ -464,7 +464,7 @@ pub fn global_search(
             ));
             return Ok(finish(&problem, params, &scored, reports, start));
         }
-        let survivors = passed.min(params.max_survivors);
+        let survivors = passed.min(params.survivor_cap());
         reports.push(level_report(
             &problem,
             level,

@@ -222,7 +222,7 @@ fn probe_car() {
         .unwrap()
         .get("car_cloud401.csv")
         .unwrap();
-    for (res, levels, surv) in [(0.2, 6, 50), (0.2, 5, 50)] {
+    for (res, levels, surv) in [(0.2, 0, 50), (0.2, 0, 300), (0.1, 0, 50)] {
         let params = SearchParams {
             resolution: res,
             levels,
@@ -236,5 +236,39 @@ fn probe_car() {
         for l in &a.levels {
             eprintln!("   level {} res {:.2} dth {:.2}deg scan {} eval {} passed {} kept {} best {} {:.3}s", l.level, l.resolution, l.angular_step.to_degrees(), l.scan_voxels, l.evaluated, l.passed, l.survivors, l.best_overlap, l.seconds);
         }
+    }
+}
+
+#[test]
+#[ignore]
+fn probe_negative() {
+    let Some(d) = data() else { return };
+    let c400 = io::read_cloud(d.join("libpointmatcher_car/car_cloud400.csv"))
+        .unwrap()
+        .cloud;
+    let s0 = tdk(&d, 0);
+    let s1 = tdk(&d, 1);
+    let dat = io::read_cloud(d.join("octomap_share_data/scan.dat"))
+        .unwrap()
+        .cloud;
+    for (name, src, dst) in [
+        ("3dtk1->car", &s1, &c400),
+        ("car->3dtk0", &c400, &s0),
+        ("scan.dat->3dtk0", &dat, &s0),
+        ("3dtk0->scan.dat", &s0, &dat),
+        ("3dtk1->3dtk0", &s1, &s0),
+    ] {
+        let params = SearchParams::default();
+        let a = align::align_clouds(src, dst, &params).unwrap();
+        eprintln!(
+            "{name}: {:.3}s overlap {} / {} ({:.2}) z {:.1} amb {} cands {:?}",
+            a.seconds,
+            a.overlap,
+            a.scan_voxels,
+            a.overlap_fraction,
+            a.significance,
+            a.ambiguity,
+            a.candidates.iter().map(|c| c.overlap).collect::<Vec<_>>()
+        );
     }
 }
