@@ -35,6 +35,7 @@
 
 #![warn(missing_docs)]
 
+pub mod align;
 pub mod cloud;
 pub mod error;
 pub mod geometry;

@@ -1,0 +1,2 @@
+//! Scan alignment.
+pub mod icp;
