@@ -2,6 +2,7 @@
 //! refinement.
 
 mod dense;
+pub mod icp;
 mod params;
 mod search;
 mod significance;
