@@ -37,6 +37,11 @@ enum Command {
     Export(commands::map::ExportArgs),
     /// Merge maps of the same resolution (counts add).
     Merge(commands::map::MergeArgs),
+    /// Register a scan onto another scan with no initial guess (multi-resolution search,
+    /// then ICP); prints T_target_source and whether to trust it.
+    Align(commands::align::AlignArgs),
+    /// Localise a scan in a prior map (.olm, .bt) with no initial guess.
+    Localize(commands::align::AlignArgs),
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
@@ -50,6 +55,7 @@ fn main() -> ExitCode {
         Command::Info(a) => commands::info::run(&a),
         Command::Convert(a) => commands::convert::run(&a),
         Command::Poses(a) => commands::poses::run(&a),
+        Command::Align(a) | Command::Localize(a) => commands::align::run(&a),
         Command::Voxelize(a) => commands::voxelize::run(&a),
         Command::Export(a) => commands::map::export(&a),
         Command::Merge(a) => commands::map::merge(&a),

@@ -1,0 +1,278 @@
+//! `olmap align` and `olmap localize`: global registration with no initial guess.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
+use olmap::align::icp::IcpParams;
+use olmap::align::{self, Dof, Region, RegisterParams, Registration, SearchParams};
+use olmap::cloud::PointCloud;
+use olmap::geometry::{Pose, PoseList};
+use olmap::io::{self, ReadOptions};
+use olmap::occupancy::{self, MapFormat};
+use serde_json::json;
+
+use crate::args::{parse_numbers, parse_pose, set_threads};
+
+/// Degrees of freedom on the command line.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum DofArg {
+    /// x, y, yaw (z, roll, pitch from the guess).
+    XyYaw,
+    /// x, y, z, yaw (roll, pitch from the guess: gravity-aligned robots).
+    XyzYaw,
+    /// All six; roll and pitch within --max-tilt of the guess.
+    #[value(name = "6dof")]
+    SixDof,
+}
+
+/// Arguments shared by `align` and `localize`.
+#[derive(Args)]
+pub struct AlignArgs {
+    /// The scan to place (any point-cloud format; in its sensor frame).
+    pub source: PathBuf,
+    /// What to place it in: a point cloud, or a map (.olm, .bt) for localisation.
+    pub target: PathBuf,
+    /// Finest voxel edge of the search, metres (maps use their own).
+    #[arg(long, default_value_t = 0.1)]
+    pub resolution: f64,
+    /// Pyramid levels (0: automatic, coarsest at least 16x the finest).
+    #[arg(long, default_value_t = 0)]
+    pub levels: usize,
+    /// Degrees of freedom searched.
+    #[arg(long, value_enum, default_value = "xyz-yaw")]
+    pub dof: DofArg,
+    /// 6dof: largest roll and pitch searched away from the guess, degrees.
+    #[arg(long, default_value_t = 15.0)]
+    pub max_tilt: f64,
+    /// A prior pose: `x,y,z,yaw,pitch,roll` (metres, degrees), or a pose file whose first
+    /// pose is used. Without --window it only supplies roll/pitch (and z for xy-yaw).
+    #[arg(long, value_name = "POSE|FILE", allow_hyphen_values = true)]
+    pub guess: Option<String>,
+    /// Search a window around the guess: `xy,z,yaw` half-widths (metres, metres, degrees)
+    /// instead of the whole target with every heading.
+    #[arg(long, value_name = "XY,Z,YAW")]
+    pub window: Option<String>,
+    /// Search the whole target and every heading (the default; conflicts with --window).
+    #[arg(long, conflicts_with = "window")]
+    pub global: bool,
+    /// Skip the ICP refinement.
+    #[arg(long)]
+    pub no_refine: bool,
+    /// Ignore source points farther than this from the sensor, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_range: f64,
+    /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
+    #[arg(long = "3dtk-valid")]
+    pub threedtk_valid: bool,
+    /// Worker threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Print per-level particle counts and timings.
+    #[arg(long)]
+    pub verbose: bool,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn read_cloud(path: &Path, valid: bool) -> anyhow::Result<PointCloud> {
+    let opts = ReadOptions {
+        uos_valid_only: valid,
+        ..Default::default()
+    };
+    Ok(io::read_cloud_with(path, &opts)?.cloud)
+}
+
+fn guess(s: &str) -> anyhow::Result<Pose> {
+    if Path::new(s).exists() {
+        let mut list = PoseList::default();
+        super::poses::read_any(Path::new(s), false, &mut list)?;
+        return list
+            .poses
+            .first()
+            .map(|p| p.pose)
+            .with_context(|| format!("{s}: no pose in the file"));
+    }
+    parse_pose(s, "--guess")
+}
+
+fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
+    let prior = a
+        .guess
+        .as_deref()
+        .map(guess)
+        .transpose()?
+        .unwrap_or_else(Pose::identity);
+    let region = match &a.window {
+        Some(w) => {
+            let v = parse_numbers::<3>(w, "--window")?;
+            if a.guess.is_none() {
+                bail!("--window needs --guess (the window's centre)");
+            }
+            Region::Window {
+                xy: v[0],
+                z: v[1],
+                yaw: v[2].to_radians(),
+            }
+        }
+        None => Region::Global,
+    };
+    let dof = match a.dof {
+        DofArg::XyYaw => Dof::XyYaw,
+        DofArg::XyzYaw => Dof::XyzYaw,
+        DofArg::SixDof => Dof::SixDof {
+            max_tilt: a.max_tilt.to_radians(),
+        },
+    };
+    Ok(RegisterParams {
+        search: SearchParams {
+            resolution: a.resolution,
+            levels: a.levels,
+            dof,
+            region,
+            prior,
+            max_range: a.max_range,
+            ..Default::default()
+        },
+        refine: (!a.no_refine).then(IcpParams::default),
+        trust: Default::default(),
+    })
+}
+
+fn matrix_rows(p: &Pose) -> Vec<Vec<f64>> {
+    let m = p.to_matrix4();
+    (0..4)
+        .map(|i| (0..4).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
+fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
+    let t = r.pose.translation();
+    let (y, p, ro) = r.pose.yaw_pitch_roll();
+    let s = &r.search;
+    if a.json {
+        let levels: Vec<_> = s
+            .levels
+            .iter()
+            .map(|l| {
+                json!({"level": l.level, "resolution": l.resolution, "angular_step_deg": l.angular_step.to_degrees(),
+                       "scan_voxels": l.scan_voxels, "evaluated": l.evaluated, "passed": l.passed,
+                       "survivors": l.survivors, "best_overlap": l.best_overlap, "seconds": l.seconds})
+            })
+            .collect();
+        let refine = r.refinement.as_ref().map(|f| {
+            json!({"T_target_source": matrix_rows(&f.pose), "converged": f.converged, "iterations": f.iterations,
+                   "inlier_rms": f.inlier_rms, "inlier_fraction": f.inlier_fraction,
+                   "degeneracy": {"eigenvalues": f.degeneracy.eigenvalues, "condition": f.degeneracy.condition,
+                                  "weak": f.degeneracy.weak}, "seconds": f.seconds})
+        });
+        let v = json!({
+            "source": a.source.display().to_string(),
+            "target": a.target.display().to_string(),
+            "T_target_source": matrix_rows(&r.pose),
+            "translation": [t.x, t.y, t.z],
+            "yaw_pitch_roll_deg": [y.to_degrees(), p.to_degrees(), ro.to_degrees()],
+            "overlap": s.overlap,
+            "overlap_fraction": s.overlap_fraction,
+            "significance": s.significance,
+            "ambiguity": s.ambiguity,
+            "trusted": r.trusted,
+            "doubts": r.doubts,
+            "search": {"T_target_source": matrix_rows(&s.pose), "evaluated": s.evaluated,
+                       "guard_acted": s.guard_acted, "seconds": s.seconds, "levels": levels},
+            "refinement": refine,
+            "seconds": r.seconds,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("T_target_source:");
+    for row in matrix_rows(&r.pose) {
+        println!(
+            "  {:>12.6} {:>12.6} {:>12.6} {:>12.6}",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    println!("translation   ({:.4}, {:.4}, {:.4}) m", t.x, t.y, t.z);
+    println!(
+        "yaw/pitch/roll {:.3} / {:.3} / {:.3} deg",
+        y.to_degrees(),
+        p.to_degrees(),
+        ro.to_degrees()
+    );
+    println!(
+        "search        overlap {} of {} voxels ({:.1} %), significance {:.1}, ambiguity {}, {} poses in {:.3} s{}",
+        s.overlap,
+        s.scan_voxels,
+        100.0 * s.overlap_fraction,
+        s.significance,
+        s.ambiguity,
+        s.evaluated,
+        s.seconds,
+        if s.guard_acted { " (survivor cap acted)" } else { "" }
+    );
+    if let Some(f) = &r.refinement {
+        println!(
+            "refinement    {} in {} iterations, inlier RMS {:.4} m, inliers {:.1} %, {:.3} s",
+            if f.converged {
+                "converged"
+            } else {
+                "NOT converged"
+            },
+            f.iterations,
+            f.inlier_rms,
+            100.0 * f.inlier_fraction,
+            f.seconds
+        );
+        if !f.degeneracy.weak.is_empty() {
+            println!(
+                "              weakly constrained: {}",
+                f.degeneracy.weak.join("; ")
+            );
+        }
+    }
+    if r.trusted {
+        println!("trusted       yes ({:.3} s)", r.seconds);
+    } else {
+        println!(
+            "trusted       NO: {} ({:.3} s)",
+            r.doubts.join("; "),
+            r.seconds
+        );
+    }
+    if a.verbose {
+        for l in &s.levels {
+            println!(
+                "  level {} ({:.3} m, {:.3} deg): {} scan voxels, {} poses, {} passed, {} kept, best {}, {:.3} s",
+                l.level,
+                l.resolution,
+                l.angular_step.to_degrees(),
+                l.scan_voxels,
+                l.evaluated,
+                l.passed,
+                l.survivors,
+                l.best_overlap,
+                l.seconds
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Runs `olmap align` (and `localize`, which is the same with a map target).
+pub fn run(a: &AlignArgs) -> anyhow::Result<ExitCode> {
+    set_threads(a.threads)?;
+    let p = params(a)?;
+    let source = read_cloud(&a.source, a.threedtk_valid)?;
+    let r = if MapFormat::from_path(&a.target).is_some() {
+        let map = occupancy::read_map(&a.target)?.map;
+        align::localize(&source, &map, &p)?
+    } else {
+        let target = read_cloud(&a.target, a.threedtk_valid)?;
+        align::register(&source, &target, &p)?
+    };
+    print(&r, a)?;
+    Ok(ExitCode::SUCCESS)
+}
