@@ -293,3 +293,49 @@ fn octomap_bt_read_write_and_octomap_accepts_ours() {
         Err(_) => eprintln!("octomap-tools not installed: the OctoMap cross-check is skipped"),
     }
 }
+
+#[test]
+fn align_json_and_localize_in_a_map() {
+    let Some(d) = data() else { return };
+    let s0 = d.join("3dtk_dat/scan000.3d");
+    let s1 = d.join("3dtk_dat/scan001.3d");
+    let v = json(&olmap(&[
+        "align",
+        "--json",
+        "--3dtk-valid",
+        s1.to_str().unwrap(),
+        s0.to_str().unwrap(),
+    ]));
+    // DESIGN.md: T_target_source as a 4x4 row-major array, overlap, significance, seconds.
+    let m = v["T_target_source"].as_array().unwrap();
+    assert_eq!(m.len(), 4);
+    let tx = m[0][3].as_f64().unwrap();
+    // Data README §1.6: scan001 is 1.568 m ahead of scan000 (5 cm tolerance, §1.7).
+    assert!((tx - 1.568).abs() < 0.05, "{tx}");
+    assert!(v["overlap"].as_u64().unwrap() > 0);
+    assert!(v["significance"].as_f64().unwrap() > 10.0);
+    assert!(v["seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(v["trusted"], true);
+    // Localisation in a voxel map of scan000.
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("s0.olm");
+    let out = olmap(&[
+        "voxelize",
+        "--3dtk-valid",
+        "--resolution",
+        "0.1",
+        s0.to_str().unwrap(),
+        "-o",
+        map.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let v = json(&olmap(&[
+        "localize",
+        "--json",
+        "--3dtk-valid",
+        s1.to_str().unwrap(),
+        map.to_str().unwrap(),
+    ]));
+    let tx = v["T_target_source"][0][3].as_f64().unwrap();
+    assert!((tx - 1.568).abs() < 0.05, "{tx}");
+}
