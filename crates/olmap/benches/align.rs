@@ -16,8 +16,8 @@ fn main() {
     divan::main();
 }
 
-/// (name, source, target, reference T_target_source, dof)
-type Pair = (&'static str, PointCloud, PointCloud, Pose, Dof);
+/// (name, source, target, reference T_target_source, dof, finest resolution)
+type Pair = (&'static str, PointCloud, PointCloud, Pose, Dof, f64);
 
 fn pairs() -> &'static [Pair] {
     static P: OnceLock<Vec<Pair>> = OnceLock::new();
@@ -54,6 +54,7 @@ fn pairs() -> &'static [Pair] {
                 tdk[0].clone(),
                 rel(1, 0),
                 Dof::XyzYaw,
+                0.1,
             ),
             (
                 "3dtk_002-000",
@@ -61,6 +62,7 @@ fn pairs() -> &'static [Pair] {
                 tdk[0].clone(),
                 rel(2, 0),
                 Dof::XyzYaw,
+                0.1,
             ),
             (
                 "3dtk_002-001",
@@ -68,6 +70,7 @@ fn pairs() -> &'static [Pair] {
                 tdk[1].clone(),
                 rel(2, 1),
                 Dof::XyzYaw,
+                0.1,
             ),
             (
                 "car_401-400",
@@ -75,6 +78,8 @@ fn pairs() -> &'static [Pair] {
                 car("car_cloud400.csv"),
                 gt,
                 Dof::six_dof(),
+                // Outdoor, ranges to 74 m: a 0.2 m finest cell.
+                0.2,
             ),
         ]
     })
@@ -91,10 +96,11 @@ fn pair(name: &str) -> Option<&'static Pair> {
     pairs().iter().find(|p| p.0 == name)
 }
 
-fn params(dof: Dof) -> RegisterParams {
+fn params(p: &Pair) -> RegisterParams {
     RegisterParams {
         search: SearchParams {
-            dof,
+            dof: p.4,
+            resolution: p.5,
             ..Default::default()
         },
         refine: Some(IcpParams::default()),
@@ -109,7 +115,7 @@ fn print_accuracy_once(p: &Pair) {
         return;
     }
     done.push(p.0);
-    let r = align::register(&p.1, &p.2, &params(p.4)).unwrap();
+    let r = align::register(&p.1, &p.2, &params(p)).unwrap();
     let e = PoseError::between(&r.pose, &p.3);
     eprintln!(
         "[{}] {} poses searched; error {:.3} m / {:.3} deg (dx {:.3} dy {:.3} dz {:.3}, yaw {:.2} pitch {:.2} roll {:.2}); trusted {}",
@@ -132,21 +138,21 @@ fn one_thread() -> &'static rayon::ThreadPool {
 fn register_all_threads(bencher: Bencher, name: &str) {
     let Some(p) = pair(name) else { return };
     print_accuracy_once(p);
-    bencher.bench(|| align::register(&p.1, &p.2, &params(p.4)).unwrap());
+    bencher.bench(|| align::register(&p.1, &p.2, &params(p)).unwrap());
 }
 
 /// Search + refinement, one thread.
 #[divan::bench(args = NAMES, sample_count = 5, sample_size = 1)]
 fn register_one_thread(bencher: Bencher, name: &str) {
     let Some(p) = pair(name) else { return };
-    bencher.bench(|| one_thread().install(|| align::register(&p.1, &p.2, &params(p.4)).unwrap()));
+    bencher.bench(|| one_thread().install(|| align::register(&p.1, &p.2, &params(p)).unwrap()));
 }
 
 /// The global search alone (no refinement), all threads.
 #[divan::bench(args = NAMES, sample_count = 5, sample_size = 1)]
 fn search_all_threads(bencher: Bencher, name: &str) {
     let Some(p) = pair(name) else { return };
-    let mut prm = params(p.4);
+    let mut prm = params(p);
     prm.refine = None;
     bencher.bench(|| align::register(&p.1, &p.2, &prm).unwrap());
 }
@@ -155,7 +161,7 @@ fn search_all_threads(bencher: Bencher, name: &str) {
 #[divan::bench(args = NAMES, sample_count = 5, sample_size = 1)]
 fn refine_all_threads(bencher: Bencher, name: &str) {
     let Some(p) = pair(name) else { return };
-    let mut prm = params(p.4);
+    let mut prm = params(p);
     prm.refine = None;
     let start = align::register(&p.1, &p.2, &prm).unwrap().pose;
     bencher.bench(|| refine(&p.1, &p.2, &start, &IcpParams::default()).unwrap());

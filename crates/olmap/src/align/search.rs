@@ -340,6 +340,22 @@ fn threshold(best: i64, keep_ratio: f64) -> i64 {
     best - ((1.0 - keep_ratio) * best.abs() as f64).floor() as i64
 }
 
+/// Evaluates and ranks the candidates of a level: the ranked scores, the best pose's hits,
+/// and how many poses pass the keep ratio.
+fn score_level(
+    problem: &Problem,
+    cands: &[Cand],
+    level: usize,
+    keep_ratio: f64,
+) -> (Vec<Scored>, u32, usize) {
+    let mut scored = evaluate(problem, cands, level);
+    rank(&mut scored);
+    let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
+    let cut = threshold(best, keep_ratio);
+    let passed = scored.iter().take_while(|s| s.0 >= cut).count();
+    (scored, best_hits, passed)
+}
+
 /// Best first; ties by lattice index (deterministic).
 fn rank(scored: &mut [Scored]) {
     scored.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.2.cmp(&b.2)));
@@ -443,11 +459,7 @@ pub fn global_search(
     let mut reports = Vec::new();
     for level in (0..=top).rev() {
         let t = Instant::now();
-        let mut scored = evaluate(&problem, &cands, level);
-        rank(&mut scored);
-        let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
-        let cut = threshold(best, params.keep_ratio);
-        let passed = scored.iter().take_while(|s| s.0 >= cut).count();
+        let (scored, best_hits, passed) = score_level(&problem, &cands, level, params.keep_ratio);
         if best_hits == 0 {
             reports.push(level_report(&problem, level, scored.len(), passed, 0, 0, t));
             return Ok(no_overlap(&problem, reports, start));
@@ -568,11 +580,7 @@ pub fn exhaustive_search(
     let problem = prepare(source, target, params)?;
     let t = Instant::now();
     let cands = initial_candidates(&problem, params, &target.pyramid, 0);
-    let mut scored = evaluate(&problem, &cands, 0);
-    rank(&mut scored);
-    let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
-    let cut = threshold(best, params.keep_ratio);
-    let passed = scored.iter().take_while(|s| s.0 >= cut).count();
+    let (scored, best_hits, passed) = score_level(&problem, &cands, 0, params.keep_ratio);
     let reports = vec![level_report(
         &problem,
         0,
