@@ -40,6 +40,7 @@ pub mod cloud;
 pub mod error;
 pub mod geometry;
 pub mod io;
+pub mod mapping;
 pub mod occupancy;
 pub mod test_data;
 

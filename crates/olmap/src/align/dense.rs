@@ -54,6 +54,41 @@ impl DenseGrid {
         })
     }
 
+    /// The key box `[lo, hi]` covered.
+    pub fn bounds(&self) -> ([i64; 3], [i64; 3]) {
+        let hi = [0, 1, 2].map(|i| self.min[i] + self.dims[i] as i64 - 1);
+        (self.min, hi)
+    }
+
+    /// A grid covering both this box and `[lo, hi]`, with the same cells set, or `None` when
+    /// the union is too large.
+    pub fn grown(&self, lo: [i64; 3], hi: [i64; 3]) -> Option<Self> {
+        let (a, b) = self.bounds();
+        let (nlo, nhi) = (
+            [0, 1, 2].map(|i| a[i].min(lo[i])),
+            [0, 1, 2].map(|i| b[i].max(hi[i])),
+        );
+        if nlo == a && nhi == b {
+            return Some(self.clone());
+        }
+        let mut g = Self::empty(nlo, nhi)?;
+        for x in 0..self.dims[0] {
+            for y in 0..self.dims[1] {
+                for z in 0..self.dims[2] {
+                    let i = (x * self.dims[1] + y) * self.dims[2] + z;
+                    if self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1 {
+                        g.set(
+                            self.min[0] + x as i64,
+                            self.min[1] + y as i64,
+                            self.min[2] + z as i64,
+                        );
+                    }
+                }
+            }
+        }
+        Some(g)
+    }
+
     /// Marks a cell (ignored outside the box).
     #[inline]
     pub fn set(&mut self, x: i64, y: i64, z: i64) {

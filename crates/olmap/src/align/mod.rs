@@ -10,7 +10,9 @@ mod significance;
 mod target;
 
 pub use params::{Dof, Region, SearchParams};
-pub use register::{localize, register, RegisterParams, Registration, TrustThresholds};
+pub use register::{
+    localize, register, register_to, RegisterParams, Registration, TrustThresholds,
+};
 pub use search::{exhaustive_search, global_search, Alignment, Candidate, LevelReport};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};

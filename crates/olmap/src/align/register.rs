@@ -47,8 +47,8 @@ impl Default for TrustThresholds {
     }
 }
 
-/// Parameters of [`register`] and [`localize`].
-#[derive(Debug, Clone, Default)]
+/// Parameters of [`register`] and [`localize`]. The default refines with ICP.
+#[derive(Debug, Clone)]
 pub struct RegisterParams {
     /// The global search.
     pub search: SearchParams,
@@ -56,6 +56,16 @@ pub struct RegisterParams {
     pub refine: Option<IcpParams>,
     /// The trust tests.
     pub trust: TrustThresholds,
+}
+
+impl Default for RegisterParams {
+    fn default() -> Self {
+        RegisterParams {
+            search: SearchParams::default(),
+            refine: Some(IcpParams::default()),
+            trust: TrustThresholds::default(),
+        }
+    }
 }
 
 /// The outcome of a registration.
@@ -158,18 +168,23 @@ pub fn register(
     target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
-    let start = Instant::now();
     let levels = levels_for_clouds(source, target, &params.search);
     let t = SearchTarget::from_cloud(target, params.search.resolution, levels)?;
-    let search = global_search(source, &t, &params.search)?;
-    finish(
-        source,
-        || target.clone(),
-        search,
-        params.search.resolution,
-        params,
-        start,
-    )
+    register_to(source, &t, target, params)
+}
+
+/// [`register`] against a prepared search target (e.g. a growing map), refining against
+/// `refine_target` (points in the target frame).
+pub fn register_to(
+    source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    params: &RegisterParams,
+) -> Result<Registration> {
+    let start = Instant::now();
+    let search = global_search(source, target, &params.search)?;
+    let res = target.pyramid().base().resolution();
+    finish(source, || refine_target.clone(), search, res, params, start)
 }
 
 /// Localises a scan in a prior map: the search against the map (no free space is known

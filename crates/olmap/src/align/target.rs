@@ -46,16 +46,28 @@ impl SearchTarget {
         resolution: f64,
         levels: usize,
     ) -> Result<Self> {
-        let mut map = OccupancyList::new(resolution)?;
+        let mut t = SearchTarget {
+            pyramid: Pyramid::new(OccupancyList::new(resolution)?, levels)?,
+            free: (0..levels).map(|_| None).collect(),
+        };
         for (c, pose) in scans {
-            map.add_points(c, pose, 1);
+            t.add_scan(c, pose)?;
         }
-        let pyramid = Pyramid::new(map, levels)?;
-        let mut free = Vec::with_capacity(levels);
-        for level in 0..levels {
-            free.push(free_space(scans, pyramid.level(level)));
+        Ok(t)
+    }
+
+    /// Adds a scan placed at `pose` (`T_target_scan`): its endpoints join every level, its
+    /// rays extend the free space. Only the new scan is traced: building a map scan by scan
+    /// costs each scan once.
+    pub fn add_scan(&mut self, cloud: &PointCloud, pose: &Pose) -> Result<()> {
+        let mut endpoints = OccupancyList::new(self.pyramid.base().resolution())?;
+        endpoints.add_points(cloud, pose, 1);
+        self.pyramid.merge(&endpoints)?;
+        for level in 0..self.pyramid.levels() {
+            let grid = self.free[level].take();
+            self.free[level] = add_free_space(grid, cloud, pose, self.pyramid.level(level));
         }
-        Ok(SearchTarget { pyramid, free })
+        Ok(())
     }
 
     /// The map pyramid.
@@ -69,11 +81,18 @@ impl SearchTarget {
     }
 }
 
-/// Cells crossed by the rays of the scans at the level's resolution, minus the last
-/// [`FREE_SPACE_MARGIN`] of each ray and minus occupied cells.
-fn free_space(scans: &[(&PointCloud, Pose)], level: &OccupancyList) -> Option<DenseGrid> {
+/// Adds the cells crossed by a scan's rays at the level's resolution (minus the last
+/// [`FREE_SPACE_MARGIN`] of each ray) to a free-space grid, then clears every occupied cell
+/// of the level. `None` when the grid would be too large.
+fn add_free_space(
+    grid: Option<DenseGrid>,
+    cloud: &PointCloud,
+    pose: &Pose,
+    level: &OccupancyList,
+) -> Option<DenseGrid> {
     let cell = level.resolution();
     let skip = (FREE_SPACE_MARGIN / cell).ceil() as usize + 1;
+    let origin = pose.transform_point(&cloud.origin());
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
     let mut grow = |p: &nalgebra::Point3<f64>| {
@@ -83,36 +102,35 @@ fn free_space(scans: &[(&PointCloud, Pose)], level: &OccupancyList) -> Option<De
             hi[i] = hi[i].max(k);
         }
     };
-    for (c, pose) in scans {
-        grow(&pose.transform_point(&c.origin()));
-        if let Some(b) = c.transformed(pose).bounding_box() {
-            grow(&b.min);
-            grow(&b.max);
-        }
+    grow(&origin);
+    let moved = cloud.transformed(pose);
+    if let Some(b) = moved.bounding_box() {
+        grow(&b.min);
+        grow(&b.max);
     }
-    let mut grid = DenseGrid::empty(lo, hi)?;
-    for (c, pose) in scans {
-        let origin = pose.transform_point(&c.origin());
-        let keys: Vec<Vec<[i64; 3]>> = c
-            .points()
-            .par_chunks(4096)
-            .map(|pts| {
-                let mut out = Vec::new();
-                for p in pts {
-                    let end = pose.transform_point(&p.cast());
-                    let ray = VoxelRay::new(&origin, &end, cell);
-                    let n = ray.remaining() as usize;
-                    for k in ray.take(n.saturating_sub(skip)) {
-                        out.push([k.x as i64, k.y as i64, k.z as i64]);
-                    }
+    let mut grid = match grid {
+        Some(g) => g.grown(lo, hi)?,
+        None => DenseGrid::empty(lo, hi)?,
+    };
+    let keys: Vec<Vec<[i64; 3]>> = moved
+        .points()
+        .par_chunks(4096)
+        .map(|pts| {
+            let mut out = Vec::new();
+            for p in pts {
+                let ray = VoxelRay::new(&origin, &p.cast(), cell);
+                let n = ray.remaining() as usize;
+                for k in ray.take(n.saturating_sub(skip)) {
+                    out.push([k.x as i64, k.y as i64, k.z as i64]);
                 }
-                out
-            })
-            .collect();
-        for k in keys.iter().flatten() {
-            grid.set(k[0], k[1], k[2]);
-        }
+            }
+            out
+        })
+        .collect();
+    for k in keys.iter().flatten() {
+        grid.set(k[0], k[1], k[2]);
     }
+    // Occupied cells (of every scan so far) are never free.
     for (k, _) in level.iter() {
         grid.clear(k.x as i64, k.y as i64, k.z as i64);
     }

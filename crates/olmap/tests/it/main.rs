@@ -4,6 +4,7 @@ mod align;
 mod align_synthetic;
 mod bad_input;
 mod fuzz;
+mod mapping;
 mod occupancy;
 mod real_data;
 mod round_trip;

@@ -1,0 +1,130 @@
+//! Evaluation of estimated scan poses against reference poses.
+
+use crate::error::{Error, Result};
+use crate::geometry::{PoseError, PoseList};
+
+/// The error of one scan's pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanError {
+    /// The scan's name.
+    pub name: String,
+    /// Estimate against reference, both relative to the common first scan.
+    pub error: PoseError,
+}
+
+/// Summary statistics of a set of errors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorSummary {
+    /// Scans compared.
+    pub scans: usize,
+    /// Mean, median and largest translation error, metres.
+    pub translation_m: [f64; 3],
+    /// Mean, median and largest rotation error, degrees.
+    pub rotation_deg: [f64; 3],
+    /// Share of scans whose translation error exceeds each of [`EVAL_THRESHOLDS_M`].
+    pub share_above_m: Vec<(f64, f64)>,
+    /// Share of scans whose rotation error exceeds each of [`EVAL_THRESHOLDS_DEG`].
+    pub share_above_deg: Vec<(f64, f64)>,
+}
+
+/// Translation thresholds of the summary, metres (the thesis reports shares above 0.3 m
+/// and 1 m, §6.5).
+pub const EVAL_THRESHOLDS_M: [f64; 4] = [0.05, 0.1, 0.3, 1.0];
+/// Rotation thresholds of the summary, degrees.
+pub const EVAL_THRESHOLDS_DEG: [f64; 3] = [1.0, 3.0, 10.0];
+
+/// The evaluation of an estimate against a reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    /// The scan whose frame both lists were expressed in.
+    pub frame: String,
+    /// Per-scan errors, in the estimate's order.
+    pub scans: Vec<ScanError>,
+    /// Names in the estimate without a reference pose.
+    pub missing: Vec<String>,
+    /// The summary.
+    pub summary: ErrorSummary,
+}
+
+fn stats(mut v: Vec<f64>) -> [f64; 3] {
+    if v.is_empty() {
+        return [0.0; 3];
+    }
+    v.sort_by(f64::total_cmp);
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let median = if v.len() % 2 == 1 {
+        v[v.len() / 2]
+    } else {
+        0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2])
+    };
+    [mean, median, *v.last().expect("non-empty")]
+}
+
+/// Compares `estimate` with `reference` scan by scan (matched by name). Both are first
+/// expressed in the frame of the first scan of `estimate` that the reference also has,
+/// so lists in different world frames compare fairly.
+///
+/// ```
+/// use olmap::geometry::{Pose, PoseList};
+/// use olmap::mapping::evaluate;
+/// let mut reference = PoseList::default();
+/// reference.push("a", Pose::identity());
+/// reference.push("b", Pose::from_xyz_ypr(1.0, 0.0, 0.0, 0.0, 0.0, 0.0));
+/// // The same trajectory in another world frame, with b 3 cm off.
+/// let shift = Pose::from_xyz_ypr(5.0, 5.0, 0.0, 1.0, 0.0, 0.0);
+/// let mut estimate = PoseList::default();
+/// estimate.push("a", shift);
+/// estimate.push("b", shift * Pose::from_xyz_ypr(1.03, 0.0, 0.0, 0.0, 0.0, 0.0));
+/// let e = evaluate(&estimate, &reference).unwrap();
+/// assert!((e.summary.translation_m[2] - 0.03).abs() < 1e-9);
+/// ```
+pub fn evaluate(estimate: &PoseList, reference: &PoseList) -> Result<Evaluation> {
+    let common = estimate
+        .poses
+        .iter()
+        .find(|p| reference.get(&p.name).is_some())
+        .ok_or_else(|| {
+            Error::InvalidArgument("the estimate and the reference share no scan name".into())
+        })?;
+    let e0 = common.pose.inverse();
+    let r0 = reference.get(&common.name).expect("found above").inverse();
+    let mut scans = Vec::new();
+    let mut missing = Vec::new();
+    for p in &estimate.poses {
+        match reference.get(&p.name) {
+            Some(r) => scans.push(ScanError {
+                name: p.name.clone(),
+                error: PoseError::between(&(e0 * p.pose), &(r0 * *r)),
+            }),
+            None => missing.push(p.name.clone()),
+        }
+    }
+    let t: Vec<f64> = scans.iter().map(|s| s.error.translation_m).collect();
+    let r: Vec<f64> = scans.iter().map(|s| s.error.rotation_deg).collect();
+    let share = |v: &[f64], th: f64| {
+        if v.is_empty() {
+            0.0
+        } else {
+            v.iter().filter(|x| **x > th).count() as f64 / v.len() as f64
+        }
+    };
+    let summary = ErrorSummary {
+        scans: scans.len(),
+        translation_m: stats(t.clone()),
+        rotation_deg: stats(r.clone()),
+        share_above_m: EVAL_THRESHOLDS_M
+            .iter()
+            .map(|&th| (th, share(&t, th)))
+            .collect(),
+        share_above_deg: EVAL_THRESHOLDS_DEG
+            .iter()
+            .map(|&th| (th, share(&r, th)))
+            .collect(),
+    };
+    Ok(Evaluation {
+        frame: common.name.clone(),
+        scans,
+        missing,
+        summary,
+    })
+}

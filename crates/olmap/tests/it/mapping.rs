@@ -1,0 +1,142 @@
+//! Map building on real data (3DTK, with and without odometry; a foreign scan mixed in).
+
+use olmap::geometry::{PoseError, PoseList};
+use olmap::io::{self, slam6d, ReadOptions};
+use olmap::mapping::{build_map, evaluate, MapMode, MapParams, ScanInput};
+
+use crate::data;
+
+fn threedtk(d: &std::path::Path, odometry: bool) -> Vec<ScanInput> {
+    let valid = ReadOptions {
+        uos_valid_only: true,
+        ..Default::default()
+    };
+    (0..3)
+        .map(|i| ScanInput {
+            name: format!("scan00{i}"),
+            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
+                .unwrap()
+                .cloud,
+            odometry: odometry.then(|| {
+                slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()
+            }),
+        })
+        .collect()
+}
+
+fn check_against_reference(
+    d: &std::path::Path,
+    placed: &[olmap::mapping::PlacedScan],
+    label: &str,
+) {
+    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    for p in placed {
+        let reference = refs.poses[p.index].pose;
+        let e = PoseError::between(&p.pose, &reference);
+        eprintln!(
+            "{label} {}: order {} dx {:.3} dy {:.3} dz {:.3} yaw {:.2} pitch {:.2} roll {:.2}",
+            p.name, p.order, e.dx_m, e.dy_m, e.dz_m, e.yaw_deg, e.pitch_deg, e.roll_deg
+        );
+        // Data README §1.7 tolerances.
+        assert!(
+            e.dx_m.abs() < 0.05 && e.dy_m.abs() < 0.05 && e.yaw_deg.abs() < 1.0,
+            "{label} {}: {e:?}",
+            p.name
+        );
+        assert!(
+            e.dz_m.abs() < 0.15 && e.pitch_deg.abs() < 3.0 && e.roll_deg.abs() < 3.0,
+            "{label} {}: {e:?}",
+            p.name
+        );
+    }
+}
+
+#[test]
+fn threedtk_batch_map_with_and_without_odometry() {
+    let Some(d) = data() else { return };
+    for odometry in [false, true] {
+        let scans = threedtk(&d, odometry);
+        let m = build_map(&scans, &MapParams::default(), |_, _| {}).unwrap();
+        eprintln!(
+            "odometry {odometry}: {} placed, {} registrations, {:.2} s, {} voxels",
+            m.placed.len(),
+            m.registrations,
+            m.seconds,
+            m.map.len()
+        );
+        assert_eq!(m.placed.len(), 3, "{:?}", m.rejected);
+        check_against_reference(
+            &d,
+            &m.placed,
+            if odometry { "odometry" } else { "no odometry" },
+        );
+        assert!(m.map.len() > 10_000);
+        if odometry {
+            assert!(
+                m.placed.iter().all(|p| !p.global),
+                "odometry windows suffice here"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_foreign_scan_is_rejected_with_a_reason() {
+    let Some(d) = data() else { return };
+    let mut scans = threedtk(&d, false);
+    scans.insert(
+        1,
+        ScanInput {
+            name: "car_cloud400".into(),
+            cloud: io::read_cloud(d.join("libpointmatcher_car/car_cloud400.csv"))
+                .unwrap()
+                .cloud,
+            odometry: None,
+        },
+    );
+    for mode in [MapMode::Batch, MapMode::Sequential] {
+        let params = MapParams {
+            mode,
+            ..Default::default()
+        };
+        let m = build_map(&scans, &params, |_, _| {}).unwrap();
+        assert_eq!(m.rejected.len(), 1, "{mode:?}");
+        assert_eq!(m.rejected[0].name, "car_cloud400");
+        assert!(!m.rejected[0].reasons.is_empty());
+        eprintln!(
+            "{mode:?}: rejected {}: {:?}",
+            m.rejected[0].name, m.rejected[0].reasons
+        );
+        let mut fixed: Vec<_> = m.placed.clone();
+        for p in &mut fixed {
+            // Index in the 3DTK set (the car was inserted at 1).
+            if p.index > 1 {
+                p.index -= 1;
+            }
+        }
+        check_against_reference(&d, &fixed, &format!("{mode:?} with a foreign scan"));
+    }
+}
+
+#[test]
+fn evaluation_of_the_reference_against_itself_and_the_odometry() {
+    let Some(d) = data() else { return };
+    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    let same = evaluate(&refs, &refs).unwrap();
+    assert!(same.summary.translation_m[2] < 1e-9);
+    let mut odo = PoseList::default();
+    for i in 0..3 {
+        odo.push(
+            format!("00{i}"),
+            slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap(),
+        );
+    }
+    let e = evaluate(&odo, &refs).unwrap();
+    // README §1.7: odometry (.pose) and final frames differ by about 2-4 cm and < 1 degree.
+    assert_eq!(e.summary.scans, 3);
+    assert!(
+        e.summary.translation_m[2] < 0.05 && e.summary.rotation_deg[2] < 1.5,
+        "{:?}",
+        e.summary
+    );
+}
