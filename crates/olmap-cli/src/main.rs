@@ -42,6 +42,11 @@ enum Command {
     Align(commands::align::AlignArgs),
     /// Localise a scan in a prior map (.olm, .bt) with no initial guess.
     Localize(commands::align::AlignArgs),
+    /// Build a map from many scans (batch best-overlap-first or sequential), with optional
+    /// odometry; writes the map, the scan poses and a report.
+    Map(commands::mapping::MapArgs),
+    /// Compare estimated poses with reference poses (per scan and summaries).
+    Eval(commands::mapping::EvalArgs),
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
@@ -55,6 +60,8 @@ fn main() -> ExitCode {
         Command::Info(a) => commands::info::run(&a),
         Command::Convert(a) => commands::convert::run(&a),
         Command::Poses(a) => commands::poses::run(&a),
+        Command::Map(a) => commands::mapping::run_map(&a),
+        Command::Eval(a) => commands::mapping::run_eval(&a),
         Command::Align(a) | Command::Localize(a) => commands::align::run(&a),
         Command::Voxelize(a) => commands::voxelize::run(&a),
         Command::Export(a) => commands::map::export(&a),

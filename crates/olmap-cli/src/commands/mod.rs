@@ -5,5 +5,6 @@ pub mod convert;
 pub mod demo;
 pub mod info;
 pub mod map;
+pub mod mapping;
 pub mod poses;
 pub mod voxelize;

@@ -46,6 +46,16 @@ pub struct Evaluation {
     pub summary: ErrorSummary,
 }
 
+/// The number at the end of a name (`scan007` -> 7), if any.
+fn trailing_number(name: &str) -> Option<u64> {
+    let digits: String = name
+        .chars()
+        .rev()
+        .take_while(char::is_ascii_digit)
+        .collect();
+    digits.chars().rev().collect::<String>().parse().ok()
+}
+
 fn stats(mut v: Vec<f64>) -> [f64; 3] {
     if v.is_empty() {
         return [0.0; 3];
@@ -60,9 +70,11 @@ fn stats(mut v: Vec<f64>) -> [f64; 3] {
     [mean, median, *v.last().expect("non-empty")]
 }
 
-/// Compares `estimate` with `reference` scan by scan (matched by name). Both are first
-/// expressed in the frame of the first scan of `estimate` that the reference also has,
-/// so lists in different world frames compare fairly.
+/// Compares `estimate` with `reference` scan by scan. Names match exactly, or else by their
+/// trailing number (`scan001`, `001` and `1` are the same scan), so a map's poses (named
+/// by file stem) compare with reference files that use bare numbers. Both lists are first
+/// expressed in the frame of the first scan of `estimate` that the reference also has, so
+/// lists in different world frames compare fairly.
 ///
 /// ```
 /// use olmap::geometry::{Pose, PoseList};
@@ -79,19 +91,29 @@ fn stats(mut v: Vec<f64>) -> [f64; 3] {
 /// assert!((e.summary.translation_m[2] - 0.03).abs() < 1e-9);
 /// ```
 pub fn evaluate(estimate: &PoseList, reference: &PoseList) -> Result<Evaluation> {
+    let find = |name: &str| {
+        reference.get(name).or_else(|| {
+            let n = trailing_number(name)?;
+            reference
+                .poses
+                .iter()
+                .find(|r| trailing_number(&r.name) == Some(n))
+                .map(|r| &r.pose)
+        })
+    };
     let common = estimate
         .poses
         .iter()
-        .find(|p| reference.get(&p.name).is_some())
+        .find(|p| find(&p.name).is_some())
         .ok_or_else(|| {
             Error::InvalidArgument("the estimate and the reference share no scan name".into())
         })?;
     let e0 = common.pose.inverse();
-    let r0 = reference.get(&common.name).expect("found above").inverse();
+    let r0 = find(&common.name).expect("found above").inverse();
     let mut scans = Vec::new();
     let mut missing = Vec::new();
     for p in &estimate.poses {
-        match reference.get(&p.name) {
+        match find(&p.name) {
             Some(r) => scans.push(ScanError {
                 name: p.name.clone(),
                 error: PoseError::between(&(e0 * p.pose), &(r0 * *r)),
