@@ -8,7 +8,7 @@ use super::target::SearchTarget;
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
-use crate::geometry::Pose;
+use crate::geometry::{Aabb, Pose};
 use crate::occupancy::OccupancyList;
 
 /// When a registration is trusted. A result is trusted only if every test passes; the
@@ -139,7 +139,14 @@ fn finish(
     params: &RegisterParams,
     start: Instant,
 ) -> Result<Registration> {
-    let refinement = match (&params.refine, search.overlap > 0) {
+    // A search that already fails its own tests is not refined: ICP cannot make an
+    // ambiguous or barely overlapping match trustworthy, and skipping it saves the most
+    // expensive part of every hopeless attempt (map building tries many).
+    let search_doubts = verdict(&search, None, resolution, &params.trust);
+    let refinement = match (
+        &params.refine,
+        search.overlap > 0 && search_doubts.is_empty(),
+    ) {
         (Some(p), true) => Some(refine(source, &refine_target(), &search.pose, p)?),
         _ => None,
     };
@@ -184,7 +191,26 @@ pub fn register_to(
     let start = Instant::now();
     let search = global_search(source, target, &params.search)?;
     let res = target.pyramid().base().resolution();
-    finish(source, || refine_target.clone(), search, res, params, start)
+    // Refine against the part of the target the source can reach from the search's pose
+    // (a large map is mostly out of reach; ICP's cost grows with its target).
+    let reach = params.refine.as_ref().map_or(0.0, |p| p.max_distance_start);
+    let crop = |pose: &Pose| {
+        let b = source.transformed(pose).bounding_box()?;
+        let m = nalgebra::Vector3::repeat(reach);
+        Some(Aabb::new(b.min - m, b.max + m))
+    };
+    let reachable = crop(&search.pose);
+    finish(
+        source,
+        || match reachable {
+            Some(b) => refine_target.crop_box(&b),
+            None => refine_target.clone(),
+        },
+        search,
+        res,
+        params,
+        start,
+    )
 }
 
 /// Localises a scan in a prior map: the search against the map (no free space is known

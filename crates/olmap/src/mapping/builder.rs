@@ -55,6 +55,11 @@ pub struct MapParams {
     pub min_count: u16,
     /// Voxel of the point map the refinement aligns to, metres (default 0.05).
     pub refine_map_voxel: f64,
+    /// With odometry: a global result farther than this from the odometry prediction is
+    /// not trusted, metres: the larger of this and 25 % of the odometry distance from the
+    /// scan it was predicted from (default 2 m). Odometry is not trusted blindly, nor is a
+    /// global match that contradicts it by tens of metres (a repetitive building).
+    pub odometry_tolerance: f64,
 }
 
 impl Default for MapParams {
@@ -68,6 +73,7 @@ impl Default for MapParams {
             bucket_radius: 0.0,
             min_count: 1,
             refine_map_voxel: 0.05,
+            odometry_tolerance: 2.0,
         }
     }
 }
@@ -127,6 +133,8 @@ struct State<'a> {
     refine_map: PointCloud,
     poses: Vec<Option<Pose>>,
     registrations: usize,
+    /// Union of the placed scans' footprints.
+    map_box: Option<Aabb>,
 }
 
 fn footprint(cloud: &PointCloud, pose: &Pose) -> Option<Aabb> {
@@ -138,8 +146,9 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 }
 
 impl State<'_> {
-    /// The odometry prediction of scan `s` from the placed scan nearest to it in input order.
-    fn predict(&self, s: usize) -> Option<Pose> {
+    /// The odometry prediction of scan `s` from the placed scan nearest to it in input
+    /// order, and the odometry distance between the two.
+    fn predict(&self, s: usize) -> Option<(Pose, f64)> {
         let odo_s = self.scans[s].odometry?;
         let (p, pose_p) = self
             .poses
@@ -149,18 +158,27 @@ impl State<'_> {
             .filter(|(i, _)| self.scans[*i].odometry.is_some())
             .min_by_key(|(i, _)| (i.abs_diff(s), *i))?;
         let odo_p = self.scans[p].odometry.expect("filtered");
-        Some(pose_p * odo_p.inverse() * odo_s)
+        let motion = odo_p.inverse() * odo_s;
+        Some((pose_p * motion, motion.translation().norm()))
     }
 
-    /// Registers scan `s` against the map: in growing windows around the odometry
-    /// prediction, then globally. Returns the registration and whether it was global.
-    fn register(&mut self, s: usize) -> Result<(Registration, bool)> {
+    /// Registers scan `s` against the map. With an odometry prediction: in windows around
+    /// it that double twice, then one as wide as the odometry tolerance; a global search
+    /// only when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
+    /// Without odometry: globally. Returns the best registration and whether it was global.
+    fn register(&mut self, s: usize, allow_global: bool) -> Result<(Registration, bool)> {
         let mut params = self.params.register.clone();
-        let mut last = None;
-        if let Some(prior) = self.predict(s) {
+        let mut best: Option<Registration> = None;
+        let prediction = self.predict(s);
+        if let Some((prior, distance)) = prediction {
             let (xy, z, yaw) = self.params.odometry_window;
-            for grow in [1.0, 2.0, 4.0] {
-                params.search.prior = prior;
+            let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
+            let mut windows: Vec<f64> = vec![1.0, 2.0, 4.0];
+            if tolerance > 4.0 * xy {
+                windows.push(tolerance / xy);
+            }
+            params.search.prior = prior;
+            for grow in windows {
                 params.search.region = Region::Window {
                     xy: xy * grow,
                     z: z * grow,
@@ -176,30 +194,66 @@ impl State<'_> {
                 if r.trusted {
                     return Ok((r, false));
                 }
-                last = Some(r);
+                if best
+                    .as_ref()
+                    .is_none_or(|b| r.search.overlap > b.search.overlap)
+                {
+                    best = Some(r);
+                }
             }
-            params.search.prior = prior;
+            if !allow_global {
+                return Ok((best.expect("at least one window"), false));
+            }
         }
         params.search.region = Region::Global;
         self.registrations += 1;
-        let r = register_to(
+        let mut r = register_to(
             &self.scans[s].cloud,
             &self.target,
             &self.refine_map,
             &params,
         )?;
-        if !r.trusted {
-            if let Some(l) = last {
-                if l.search.overlap > r.search.overlap {
-                    return Ok((l, false));
-                }
+        if let Some((prior, distance)) = prediction {
+            let off = (r.pose.translation() - prior.translation()).norm();
+            let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
+            if r.trusted && off > tolerance {
+                r.trusted = false;
+                r.doubts.push(format!(
+                    "the global match is {off:.2} m from the odometry prediction (tolerance {tolerance:.2} m)"
+                ));
             }
         }
-        Ok((r, true))
+        match best {
+            Some(b) if !r.trusted && b.search.overlap > r.search.overlap => Ok((b, false)),
+            _ => Ok((r, true)),
+        }
+    }
+
+    /// Whether odometry puts scan `s` clearly outside the map so far (its predicted
+    /// footprint, widened by every window and tolerance, misses the map's box): no search
+    /// can succeed yet, so the batch mapper does not spend one.
+    fn far_from_map(&self, s: usize) -> bool {
+        let (Some((prior, distance)), Some(map)) = (self.predict(s), self.map_box) else {
+            return false;
+        };
+        let Some(fp) = footprint(&self.scans[s].cloud, &prior) else {
+            return false;
+        };
+        let margin = (4.0 * self.params.odometry_window.0)
+            .max(self.params.odometry_tolerance)
+            .max(0.25 * distance);
+        let widened = Aabb::new(
+            fp.min - nalgebra::Vector3::repeat(margin),
+            fp.max + nalgebra::Vector3::repeat(margin),
+        );
+        !overlaps(&widened, &map)
     }
 
     fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
         let cloud = &self.scans[s].cloud;
+        if let Some(fp) = footprint(cloud, &pose) {
+            self.map_box = Some(self.map_box.map_or(fp, |b| b.union(&fp)));
+        }
         self.target.add_scan(cloud, &pose)?;
         self.refine_map.extend_from(&cloud.transformed(&pose));
         self.refine_map = self
@@ -267,6 +321,7 @@ pub fn build_map(
         refine_map: PointCloud::new(),
         poses: vec![None; scans.len()],
         registrations: 0,
+        map_box: None,
     };
     state.place(params.first, Pose::identity())?;
     let mut placed = vec![PlacedScan {
@@ -284,7 +339,7 @@ pub fn build_map(
     match params.mode {
         MapMode::Sequential => {
             for s in (0..scans.len()).filter(|&s| s != params.first) {
-                let (r, global) = state.register(s)?;
+                let (r, global) = state.register(s, true)?;
                 if r.trusted {
                     state.place(s, r.pose)?;
                     placed.push(placed_record(s, &scans[s].name, placed.len(), &r, global));
@@ -295,25 +350,17 @@ pub fn build_map(
             }
         }
         MapMode::Batch => {
-            // Cached registrations of unplaced scans with their footprints in the map.
+            // Cached registrations of unplaced scans with their footprints in the map, and
+            // how many scans were placed when each was computed.
             let mut cache: Vec<Option<(Registration, bool, Option<Aabb>)>> =
                 vec![None; scans.len()];
-            loop {
-                let unplaced: Vec<usize> = (0..scans.len())
-                    .filter(|&s| state.poses[s].is_none())
-                    .collect();
-                if unplaced.is_empty() {
-                    break;
-                }
-                for &s in &unplaced {
-                    if cache[s].is_none() {
-                        let (r, global) = state.register(s)?;
-                        let fp = footprint(&scans[s].cloud, &r.pose);
-                        cache[s] = Some((r, global, fp));
-                    }
-                }
-                // The best trusted candidate: overlap, then significance, then index.
-                let best = unplaced
+            let mut attempted_at = vec![usize::MAX; scans.len()];
+            // Scans odometry places outside the map so far, and those searched anyway once.
+            let mut far = vec![false; scans.len()];
+            let mut forced = vec![false; scans.len()];
+            let best_trusted = |cache: &[Option<(Registration, bool, Option<Aabb>)>],
+                                unplaced: &[usize]| {
+                unplaced
                     .iter()
                     .filter_map(|&s| cache[s].as_ref().filter(|c| c.0.trusted).map(|c| (s, c)))
                     .max_by(|a, b| {
@@ -322,7 +369,67 @@ pub fn build_map(
                             .unwrap_or(std::cmp::Ordering::Equal)
                             .then(b.0.cmp(&a.0))
                     })
-                    .map(|(s, _)| s);
+                    .map(|(s, _)| s)
+            };
+            loop {
+                let unplaced: Vec<usize> = (0..scans.len())
+                    .filter(|&s| state.poses[s].is_none())
+                    .collect();
+                if unplaced.is_empty() {
+                    break;
+                }
+                for &s in &unplaced {
+                    if attempted_at[s] == usize::MAX {
+                        attempted_at[s] = 0;
+                    }
+                }
+                let placed_now = placed.len();
+                for &s in &unplaced {
+                    if cache[s].is_none() && !(far[s] && attempted_at[s] == placed_now) {
+                        far[s] = state.far_from_map(s);
+                        attempted_at[s] = placed_now;
+                        if !far[s] {
+                            let (r, global) = state.register(s, false)?;
+                            let fp = footprint(&scans[s].cloud, &r.pose);
+                            cache[s] = Some((r, global, fp));
+                        }
+                    }
+                }
+                let mut best = best_trusted(&cache, &unplaced);
+                if best.is_none() {
+                    // Nothing trusted: retry the scans last tried against a smaller map.
+                    let stale: Vec<usize> = unplaced
+                        .iter()
+                        .copied()
+                        .filter(|&s| attempted_at[s] < placed_now)
+                        .collect();
+                    for &s in &stale {
+                        far[s] = state.far_from_map(s);
+                        attempted_at[s] = placed_now;
+                        if !far[s] {
+                            let (r, global) = state.register(s, false)?;
+                            let fp = footprint(&scans[s].cloud, &r.pose);
+                            cache[s] = Some((r, global, fp));
+                        }
+                    }
+                    best = best_trusted(&cache, &unplaced);
+                }
+                if best.is_none() {
+                    // Last resort before giving up: odometry may be wrong, search anyway.
+                    let last_resort: Vec<usize> = unplaced
+                        .iter()
+                        .copied()
+                        .filter(|&s| far[s] && !forced[s])
+                        .collect();
+                    for s in last_resort {
+                        forced[s] = true;
+                        far[s] = false;
+                        let (r, global) = state.register(s, true)?;
+                        let fp = footprint(&scans[s].cloud, &r.pose);
+                        cache[s] = Some((r, global, fp));
+                    }
+                    best = best_trusted(&cache, &unplaced);
+                }
                 let Some(s) = best else {
                     for &u in &unplaced {
                         last_doubts[u] = cache[u].as_ref().map(|c| c.0.doubts.clone());
@@ -333,11 +440,13 @@ pub fn build_map(
                 state.place(s, r.pose)?;
                 placed.push(placed_record(s, &scans[s].name, placed.len(), &r, global));
                 progress(placed.len(), scans.len());
-                // Reuse results whose map region did not change; retry the untrusted.
+                // Trusted results whose map region changed are recomputed; the others are
+                // reused (untrusted ones are retried only when nothing trusted is left).
                 for &u in &unplaced {
                     let stale = match (&cache[u], &fp) {
-                        (Some((ru, _, Some(fu))), Some(fs)) => !ru.trusted || overlaps(fu, fs),
-                        _ => true,
+                        (Some((ru, _, Some(fu))), Some(fs)) => ru.trusted && overlaps(fu, fs),
+                        (Some(_), _) => false,
+                        (None, _) => true,
                     };
                     if stale {
                         cache[u] = None;
