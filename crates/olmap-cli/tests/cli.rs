@@ -339,3 +339,62 @@ fn align_json_and_localize_in_a_map() {
     let tx = v["T_target_source"][0][3].as_f64().unwrap();
     assert!((tx - 1.568).abs() < 0.05, "{tx}");
 }
+
+#[test]
+fn map_a_3dtk_folder_then_eval_and_export() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("map.olm");
+    let poses = dir.path().join("poses.txt");
+    let report = dir.path().join("report.json");
+    let folder = d.join("3dtk_dat");
+    let v = json(&olmap(&[
+        "map",
+        "--json",
+        folder.to_str().unwrap(),
+        "-o",
+        map.to_str().unwrap(),
+        "--poses-out",
+        poses.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]));
+    assert_eq!(v["placed"].as_array().unwrap().len(), 3);
+    assert!(v["rejected"].as_array().unwrap().is_empty());
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(saved["placed"], v["placed"]);
+    // Against the reference (data README §1.7 tolerances, checked on the total here).
+    let reference = folder.join("reference_poses_rh_m.txt");
+    let e = json(&olmap(&[
+        "eval",
+        "--json",
+        "--poses",
+        poses.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+    ]));
+    assert_eq!(e["summary"]["scans"], 3);
+    assert!(e["summary"]["translation_m"]["max"].as_f64().unwrap() < 0.15);
+    assert!(e["summary"]["rotation_deg"]["max"].as_f64().unwrap() < 3.0);
+    // The saved map reloads to the same content and exports to .bt and .ply.
+    let loaded = olmap::occupancy::read_map(&map).unwrap().map;
+    assert_eq!(loaded.len() as u64, v["voxels"].as_u64().unwrap());
+    for out in ["map.bt", "map.ply"] {
+        let p = dir.path().join(out);
+        assert!(
+            olmap(&["export", map.to_str().unwrap(), "-o", p.to_str().unwrap()])
+                .status
+                .success()
+        );
+    }
+    let bt = olmap::occupancy::read_map(dir.path().join("map.bt"))
+        .unwrap()
+        .map;
+    assert_eq!(
+        bt.sorted().iter().map(|(k, _)| *k).collect::<Vec<_>>(),
+        loaded.sorted().iter().map(|(k, _)| *k).collect::<Vec<_>>()
+    );
+    let ply = olmap::io::read_cloud(dir.path().join("map.ply")).unwrap();
+    assert_eq!(ply.cloud.len(), loaded.len());
+}
