@@ -38,6 +38,7 @@
 pub mod align;
 pub mod cloud;
 pub mod error;
+pub mod fixtures;
 pub mod geometry;
 pub mod io;
 pub mod mapping;

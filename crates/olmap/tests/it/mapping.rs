@@ -141,80 +141,18 @@ fn evaluation_of_the_reference_against_itself_and_the_odometry() {
     );
 }
 
-/// Points on the surfaces of a 40 x 10 x 3 m hall with pseudo-random boxes and pillars (a
-/// fixed seed), every `step` metres.
-fn hall(step: f64) -> Vec<nalgebra::Point3<f64>> {
-    use nalgebra::Point3;
-    let mut pts = Vec::new();
-    let mut face = |o: [f64; 3], u: [f64; 3], v: [f64; 3], lu: f64, lv: f64| {
-        for i in 0..=((lu / step) as i32) {
-            for j in 0..=((lv / step) as i32) {
-                let (a, b) = (i as f64 * step, j as f64 * step);
-                pts.push(Point3::new(
-                    o[0] + a * u[0] + b * v[0],
-                    o[1] + a * u[1] + b * v[1],
-                    o[2] + a * u[2] + b * v[2],
-                ));
-            }
-        }
-    };
-    let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
-    face([0.0, 0.0, 0.0], x, y, 40.0, 10.0);
-    face([0.0, 0.0, 0.0], x, z, 40.0, 3.0);
-    face([0.0, 10.0, 0.0], x, z, 40.0, 3.0);
-    face([0.0, 0.0, 0.0], y, z, 10.0, 3.0);
-    face([40.0, 0.0, 0.0], y, z, 10.0, 3.0);
-    let mut s = 0x1234_5678_9abc_def1u64;
-    let mut next = || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
-    for _ in 0..140 {
-        let (bx, by) = (1.0 + next() * 37.0, 0.3 + next() * 9.0);
-        let (w, d, h) = (0.4 + next() * 1.5, 0.4 + next() * 1.0, 0.5 + next() * 2.0);
-        face([bx, by, 0.0], x, z, w, h);
-        face([bx, by + d, 0.0], x, z, w, h);
-        face([bx, by, 0.0], y, z, d, h);
-        face([bx + w, by, 0.0], y, z, d, h);
-        face([bx, by, h], x, y, w, d);
-    }
-    pts
-}
-
 #[test]
 fn batch_chains_scans_that_sequential_order_cannot() {
-    use olmap::cloud::PointCloud;
     use olmap::geometry::Pose;
-    let world = hall(0.15);
+    let world = olmap::fixtures::hall(0.15);
     // 20 stops along the hall, given in an interleaved order (0, 10, 1, 11, ...): scans
     // consecutive in the input are 19 m apart and never overlap (8 m sensor range).
-    let truth: Vec<Pose> = (0..20)
-        .map(|i| {
-            Pose::from_xyz_ypr(
-                2.0 + 1.9 * i as f64,
-                5.0 + 0.4 * ((i * 7 % 5) as f64 - 2.0) / 2.0,
-                2.8,
-                0.2 * ((i * 3 % 7) as f64 - 3.0) / 3.0,
-                0.0,
-                0.0,
-            )
-        })
-        .collect();
+    let truth: Vec<Pose> = olmap::fixtures::hall_trajectory(20, 1.9);
     let order: Vec<usize> = (0..10).flat_map(|i| [i, i + 10]).collect();
     let scans: Vec<ScanInput> = order
         .iter()
         .map(|&i| {
-            let inv = truth[i].inverse();
-            let origin = nalgebra::Point3::from(truth[i].translation());
-            let cloud = PointCloud::from_points(
-                world
-                    .iter()
-                    .filter(|p| (*p - origin).norm() < 8.0)
-                    .map(|p| inv.transform_point(p).cast::<f32>())
-                    .collect(),
-            );
+            let cloud = olmap::fixtures::scan_of(&world, &truth[i], 8.0);
             // Odometry drifting 3 % in distance and 0.5 degree per stop.
             let drift = Pose::from_xyz_ypr(
                 0.03 * truth[i].translation().x,
