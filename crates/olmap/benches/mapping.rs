@@ -1,0 +1,92 @@
+//! Map building: the 3DTK set and synthetic hall trajectories (10, 20, 40 scans in
+//! trajectory order), batch mode, with and without odometry. Time per scan and the number
+//! of registrations show how the cost grows with the scan count.
+//!
+//! `cargo bench -p olmap --bench mapping`
+
+use std::sync::OnceLock;
+
+use divan::counter::ItemsCount;
+use divan::Bencher;
+use olmap::fixtures::{hall, hall_trajectory, scan_of};
+use olmap::geometry::Pose;
+use olmap::io::{self, slam6d, ReadOptions};
+use olmap::mapping::{build_map, MapParams, ScanInput};
+
+fn main() {
+    divan::main();
+}
+
+fn threedtk(odometry: bool) -> Vec<ScanInput> {
+    let Some(d) = olmap::test_data::dir() else {
+        return Vec::new();
+    };
+    let valid = ReadOptions {
+        uos_valid_only: true,
+        ..Default::default()
+    };
+    (0..3)
+        .map(|i| ScanInput {
+            name: format!("scan00{i}"),
+            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid).unwrap().cloud,
+            odometry: odometry.then(|| slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()),
+        })
+        .collect()
+}
+
+fn synthetic(n: usize, odometry: bool) -> Vec<ScanInput> {
+    static WORLD: OnceLock<Vec<nalgebra::Point3<f64>>> = OnceLock::new();
+    let world = WORLD.get_or_init(|| hall(0.15));
+    // 40 stops fill the 40 m hall at 0.9 m spacing; fewer stops cover its start.
+    hall_trajectory(n, 0.9)
+        .iter()
+        .enumerate()
+        .map(|(i, t)| ScanInput {
+            name: format!("stop{i:02}"),
+            cloud: scan_of(world, t, 8.0),
+            odometry: odometry.then(|| Pose::from_xyz_ypr(0.03 * t.translation().x, 0.0, 0.0, (0.5 * i as f64).to_radians(), 0.0, 0.0) * *t),
+        })
+        .collect()
+}
+
+fn params(resolution: f64) -> MapParams {
+    let mut p = MapParams::default();
+    p.register.search.resolution = resolution;
+    p
+}
+
+fn run(bencher: Bencher, scans: Vec<ScanInput>, resolution: f64, label: &str) {
+    if scans.is_empty() {
+        return;
+    }
+    let m = build_map(&scans, &params(resolution), |_, _| {}).unwrap();
+    eprintln!(
+        "[{label}] {} of {} placed, {} registrations, {:.2} s ({:.3} s per scan)",
+        m.placed.len(),
+        scans.len(),
+        m.registrations,
+        m.seconds,
+        m.seconds / scans.len() as f64
+    );
+    bencher
+        .counter(ItemsCount::new(scans.len()))
+        .bench(|| build_map(&scans, &params(resolution), |_, _| {}).unwrap());
+}
+
+/// The three 3DTK scans at 0.1 m.
+#[divan::bench(args = [false, true], sample_count = 3, sample_size = 1)]
+fn threedtk_batch(bencher: Bencher, odometry: bool) {
+    run(bencher, threedtk(odometry), 0.1, &format!("3dtk odometry={odometry}"));
+}
+
+/// Synthetic hall stops in trajectory order at 0.2 m, without odometry.
+#[divan::bench(args = [10, 20, 40], sample_count = 2, sample_size = 1)]
+fn hall_batch_no_odometry(bencher: Bencher, n: usize) {
+    run(bencher, synthetic(n, false), 0.2, &format!("hall {n} no odometry"));
+}
+
+/// Synthetic hall stops in trajectory order at 0.2 m, with drifting odometry.
+#[divan::bench(args = [10, 20, 40], sample_count = 2, sample_size = 1)]
+fn hall_batch_odometry(bencher: Bencher, n: usize) {
+    run(bencher, synthetic(n, true), 0.2, &format!("hall {n} odometry"));
+}
