@@ -229,6 +229,24 @@ impl State<'_> {
         }
     }
 
+    /// Registers scan `s` in a window (the first odometry window) around `prior`: the
+    /// confirmation of a cached result before the scan joins the map.
+    fn register_near(&mut self, s: usize, prior: Pose) -> Result<Registration> {
+        let mut params = self.params.register.clone();
+        let (xy, z, yaw) = self.params.odometry_window;
+        params.search.prior = prior;
+        params.search.region = Region::Window { xy, z, yaw };
+        self.registrations += 1;
+        register_to(&self.scans[s].cloud, &self.target, &self.refine_map, &params)
+    }
+
+    /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
+    /// a cheap update of a cached result's score after the map grew.
+    fn overlap_fraction_at(&self, list: &OccupancyList, pose: &Pose) -> Result<f64> {
+        let n = list.len().max(1) as f64;
+        Ok(self.target.pyramid().base().overlap(list, pose)? as f64 / n)
+    }
+
     /// Whether odometry puts scan `s` clearly outside the map so far (its predicted
     /// footprint, widened by every window and tolerance, misses the map's box): no search
     /// can succeed yet, so the batch mapper does not spend one.
@@ -358,14 +376,18 @@ pub fn build_map(
             // Scans odometry places outside the map so far, and those searched anyway once.
             let mut far = vec![false; scans.len()];
             let mut forced = vec![false; scans.len()];
+            // Cached results whose score was refreshed at their pose after the map grew
+            // (confirmed by a window search before the scan joins), and the scans' voxels.
+            let mut provisional = vec![false; scans.len()];
+            let mut voxels: Vec<Option<OccupancyList>> = vec![None; scans.len()];
             let best_trusted = |cache: &[Option<(Registration, bool, Option<Aabb>)>],
                                 unplaced: &[usize]| {
                 unplaced
                     .iter()
                     .filter_map(|&s| cache[s].as_ref().filter(|c| c.0.trusted).map(|c| (s, c)))
                     .max_by(|a, b| {
-                        (a.1 .0.search.overlap, a.1 .0.search.significance)
-                            .partial_cmp(&(b.1 .0.search.overlap, b.1 .0.search.significance))
+                        (a.1 .0.search.overlap_fraction, a.1 .0.search.significance)
+                            .partial_cmp(&(b.1 .0.search.overlap_fraction, b.1 .0.search.significance))
                             .unwrap_or(std::cmp::Ordering::Equal)
                             .then(b.0.cmp(&a.0))
                     })
@@ -437,19 +459,38 @@ pub fn build_map(
                     break;
                 };
                 let (r, global, fp) = cache[s].take().expect("chosen from the cache");
+                let (r, global, fp) = if provisional[s] {
+                    provisional[s] = false;
+                    let confirmed = state.register_near(s, r.pose)?;
+                    if !confirmed.trusted {
+                        let fpc = footprint(&scans[s].cloud, &confirmed.pose);
+                        cache[s] = Some((confirmed, global, fpc));
+                        continue;
+                    }
+                    let fpc = footprint(&scans[s].cloud, &confirmed.pose);
+                    (confirmed, global, fpc)
+                } else {
+                    (r, global, fp)
+                };
                 state.place(s, r.pose)?;
                 placed.push(placed_record(s, &scans[s].name, placed.len(), &r, global));
                 progress(placed.len(), scans.len());
-                // Trusted results whose map region changed are recomputed; the others are
-                // reused (untrusted ones are retried only when nothing trusted is left).
+                // Trusted results whose map region changed get their score refreshed at
+                // their pose (cheap) and are confirmed before joining; untrusted ones are
+                // retried only when nothing trusted is left.
                 for &u in &unplaced {
-                    let stale = match (&cache[u], &fp) {
+                    let touched = match (&cache[u], &fp) {
                         (Some((ru, _, Some(fu))), Some(fs)) => ru.trusted && overlaps(fu, fs),
-                        (Some(_), _) => false,
-                        (None, _) => true,
+                        _ => false,
                     };
-                    if stale {
-                        cache[u] = None;
+                    if touched {
+                        if voxels[u].is_none() {
+                            voxels[u] = Some(OccupancyList::from_cloud(&scans[u].cloud, res)?);
+                        }
+                        let list = voxels[u].as_ref().expect("just set");
+                        let entry = cache[u].as_mut().expect("touched");
+                        entry.0.search.overlap_fraction = state.overlap_fraction_at(list, &entry.0.pose)?;
+                        provisional[u] = true;
                     }
                 }
             }
