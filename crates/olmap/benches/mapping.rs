@@ -28,8 +28,12 @@ fn threedtk(odometry: bool) -> Vec<ScanInput> {
     (0..3)
         .map(|i| ScanInput {
             name: format!("scan00{i}"),
-            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid).unwrap().cloud,
-            odometry: odometry.then(|| slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()),
+            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
+                .unwrap()
+                .cloud,
+            odometry: odometry.then(|| {
+                slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()
+            }),
         })
         .collect()
 }
@@ -44,7 +48,16 @@ fn synthetic(n: usize, odometry: bool) -> Vec<ScanInput> {
         .map(|(i, t)| ScanInput {
             name: format!("stop{i:02}"),
             cloud: scan_of(world, t, 8.0),
-            odometry: odometry.then(|| Pose::from_xyz_ypr(0.03 * t.translation().x, 0.0, 0.0, (0.5 * i as f64).to_radians(), 0.0, 0.0) * *t),
+            odometry: odometry.then(|| {
+                Pose::from_xyz_ypr(
+                    0.03 * t.translation().x,
+                    0.0,
+                    0.0,
+                    (0.5 * i as f64).to_radians(),
+                    0.0,
+                    0.0,
+                ) * *t
+            }),
         })
         .collect()
 }
@@ -76,17 +89,32 @@ fn run(bencher: Bencher, scans: Vec<ScanInput>, resolution: f64, label: &str) {
 /// The three 3DTK scans at 0.1 m.
 #[divan::bench(args = [false, true], sample_count = 3, sample_size = 1)]
 fn threedtk_batch(bencher: Bencher, odometry: bool) {
-    run(bencher, threedtk(odometry), 0.1, &format!("3dtk odometry={odometry}"));
+    run(
+        bencher,
+        threedtk(odometry),
+        0.1,
+        &format!("3dtk odometry={odometry}"),
+    );
 }
 
 /// Synthetic hall stops in trajectory order at 0.2 m, without odometry.
 #[divan::bench(args = [10, 20, 40], sample_count = 2, sample_size = 1)]
 fn hall_batch_no_odometry(bencher: Bencher, n: usize) {
-    run(bencher, synthetic(n, false), 0.2, &format!("hall {n} no odometry"));
+    run(
+        bencher,
+        synthetic(n, false),
+        0.2,
+        &format!("hall {n} no odometry"),
+    );
 }
 
 /// Synthetic hall stops in trajectory order at 0.2 m, with drifting odometry.
 #[divan::bench(args = [10, 20, 40], sample_count = 2, sample_size = 1)]
 fn hall_batch_odometry(bencher: Bencher, n: usize) {
-    run(bencher, synthetic(n, true), 0.2, &format!("hall {n} odometry"));
+    run(
+        bencher,
+        synthetic(n, true),
+        0.2,
+        &format!("hall {n} odometry"),
+    );
 }

@@ -146,8 +146,8 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 }
 
 impl State<'_> {
-    /// The odometry prediction of scan `s` from the placed scan nearest to it in input
-    /// order, and the odometry distance between the two.
+    /// The odometry prediction of scan `s` from the placed scan nearest to it by odometry
+    /// (the least drift in between), and the odometry distance between the two.
     fn predict(&self, s: usize) -> Option<(Pose, f64)> {
         let odo_s = self.scans[s].odometry?;
         let (p, pose_p) = self
@@ -156,7 +156,13 @@ impl State<'_> {
             .enumerate()
             .filter_map(|(i, p)| p.map(|p| (i, p)))
             .filter(|(i, _)| self.scans[*i].odometry.is_some())
-            .min_by_key(|(i, _)| (i.abs_diff(s), *i))?;
+            .min_by(|(i, _), (j, _)| {
+                let d = |k: usize| {
+                    (self.scans[k].odometry.expect("filtered").translation() - odo_s.translation())
+                        .norm()
+                };
+                d(*i).total_cmp(&d(*j)).then(i.cmp(j))
+            })?;
         let odo_p = self.scans[p].odometry.expect("filtered");
         let motion = odo_p.inverse() * odo_s;
         Some((pose_p * motion, motion.translation().norm()))
@@ -237,7 +243,12 @@ impl State<'_> {
         params.search.prior = prior;
         params.search.region = Region::Window { xy, z, yaw };
         self.registrations += 1;
-        register_to(&self.scans[s].cloud, &self.target, &self.refine_map, &params)
+        register_to(
+            &self.scans[s].cloud,
+            &self.target,
+            &self.refine_map,
+            &params,
+        )
     }
 
     /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
@@ -387,7 +398,10 @@ pub fn build_map(
                     .filter_map(|&s| cache[s].as_ref().filter(|c| c.0.trusted).map(|c| (s, c)))
                     .max_by(|a, b| {
                         (a.1 .0.search.overlap_fraction, a.1 .0.search.significance)
-                            .partial_cmp(&(b.1 .0.search.overlap_fraction, b.1 .0.search.significance))
+                            .partial_cmp(&(
+                                b.1 .0.search.overlap_fraction,
+                                b.1 .0.search.significance,
+                            ))
                             .unwrap_or(std::cmp::Ordering::Equal)
                             .then(b.0.cmp(&a.0))
                     })
@@ -419,12 +433,21 @@ pub fn build_map(
                 }
                 let mut best = best_trusted(&cache, &unplaced);
                 if best.is_none() {
-                    // Nothing trusted: retry the scans last tried against a smaller map.
-                    let stale: Vec<usize> = unplaced
+                    // Nothing trusted: retry every scan last tried against a smaller map
+                    // (all of them: stopping at the first trusted one let a false match in
+                    // the synthetic hall win over the true, better one).
+                    let placed_idx: Vec<usize> = placed.iter().map(|p| p.index).collect();
+                    let mut stale: Vec<usize> = unplaced
                         .iter()
                         .copied()
                         .filter(|&s| attempted_at[s] < placed_now)
                         .collect();
+                    stale.sort_by_key(|&s| {
+                        (
+                            placed_idx.iter().map(|&p| p.abs_diff(s)).min().unwrap_or(0),
+                            s,
+                        )
+                    });
                     for &s in &stale {
                         far[s] = state.far_from_map(s);
                         attempted_at[s] = placed_now;
@@ -489,7 +512,8 @@ pub fn build_map(
                         }
                         let list = voxels[u].as_ref().expect("just set");
                         let entry = cache[u].as_mut().expect("touched");
-                        entry.0.search.overlap_fraction = state.overlap_fraction_at(list, &entry.0.pose)?;
+                        entry.0.search.overlap_fraction =
+                            state.overlap_fraction_at(list, &entry.0.pose)?;
                         provisional[u] = true;
                     }
                 }

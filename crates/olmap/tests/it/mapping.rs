@@ -188,8 +188,8 @@ fn batch_chains_scans_that_sequential_order_cannot() {
     }
     for p in &batch.placed {
         eprintln!(
-            "placed {} #{} ov {:.2} z {:.1}",
-            p.name, p.order, p.overlap_fraction, p.significance
+            "placed {} #{} ov {:.2} z {:.1} global {} at {}",
+            p.name, p.order, p.overlap_fraction, p.significance, p.global, p.pose
         );
     }
     assert_eq!(batch.placed.len(), 20, "{:?}", batch.rejected);
