@@ -126,6 +126,10 @@ pub struct MapBuild {
     pub seconds: f64,
 }
 
+/// A batch mapper's cached registration: the result, whether its search was global, and
+/// the scan's footprint in the map at the result.
+type CacheEntry = (Registration, bool, Option<Aabb>);
+
 struct State<'a> {
     scans: &'a [ScanInput],
     params: &'a MapParams,
@@ -233,6 +237,13 @@ impl State<'_> {
             Some(b) if !r.trusted && b.search.overlap > r.search.overlap => Ok((b, false)),
             _ => Ok((r, true)),
         }
+    }
+
+    /// [`State::register`] with the scan's footprint at the result: a batch cache entry.
+    fn attempt(&mut self, s: usize, allow_global: bool) -> Result<CacheEntry> {
+        let (r, global) = self.register(s, allow_global)?;
+        let fp = footprint(&self.scans[s].cloud, &r.pose);
+        Ok((r, global, fp))
     }
 
     /// Registers scan `s` in a window (the first odometry window) around `prior`: the
@@ -381,8 +392,7 @@ pub fn build_map(
         MapMode::Batch => {
             // Cached registrations of unplaced scans with their footprints in the map, and
             // how many scans were placed when each was computed.
-            let mut cache: Vec<Option<(Registration, bool, Option<Aabb>)>> =
-                vec![None; scans.len()];
+            let mut cache: Vec<Option<CacheEntry>> = vec![None; scans.len()];
             let mut attempted_at = vec![usize::MAX; scans.len()];
             // Scans odometry places outside the map so far, and those searched anyway once.
             let mut far = vec![false; scans.len()];
@@ -391,8 +401,7 @@ pub fn build_map(
             // (confirmed by a window search before the scan joins), and the scans' voxels.
             let mut provisional = vec![false; scans.len()];
             let mut voxels: Vec<Option<OccupancyList>> = vec![None; scans.len()];
-            let best_trusted = |cache: &[Option<(Registration, bool, Option<Aabb>)>],
-                                unplaced: &[usize]| {
+            let best_trusted = |cache: &[Option<CacheEntry>], unplaced: &[usize]| {
                 unplaced
                     .iter()
                     .filter_map(|&s| cache[s].as_ref().filter(|c| c.0.trusted).map(|c| (s, c)))
@@ -425,9 +434,7 @@ pub fn build_map(
                         far[s] = state.far_from_map(s);
                         attempted_at[s] = placed_now;
                         if !far[s] {
-                            let (r, global) = state.register(s, false)?;
-                            let fp = footprint(&scans[s].cloud, &r.pose);
-                            cache[s] = Some((r, global, fp));
+                            cache[s] = Some(state.attempt(s, false)?);
                         }
                     }
                 }
@@ -436,25 +443,16 @@ pub fn build_map(
                     // Nothing trusted: retry every scan last tried against a smaller map
                     // (all of them: stopping at the first trusted one let a false match in
                     // the synthetic hall win over the true, better one).
-                    let placed_idx: Vec<usize> = placed.iter().map(|p| p.index).collect();
-                    let mut stale: Vec<usize> = unplaced
+                    let stale: Vec<usize> = unplaced
                         .iter()
                         .copied()
                         .filter(|&s| attempted_at[s] < placed_now)
                         .collect();
-                    stale.sort_by_key(|&s| {
-                        (
-                            placed_idx.iter().map(|&p| p.abs_diff(s)).min().unwrap_or(0),
-                            s,
-                        )
-                    });
                     for &s in &stale {
                         far[s] = state.far_from_map(s);
                         attempted_at[s] = placed_now;
                         if !far[s] {
-                            let (r, global) = state.register(s, false)?;
-                            let fp = footprint(&scans[s].cloud, &r.pose);
-                            cache[s] = Some((r, global, fp));
+                            cache[s] = Some(state.attempt(s, false)?);
                         }
                     }
                     best = best_trusted(&cache, &unplaced);
@@ -469,9 +467,7 @@ pub fn build_map(
                     for s in last_resort {
                         forced[s] = true;
                         far[s] = false;
-                        let (r, global) = state.register(s, true)?;
-                        let fp = footprint(&scans[s].cloud, &r.pose);
-                        cache[s] = Some((r, global, fp));
+                        cache[s] = Some(state.attempt(s, true)?);
                     }
                     best = best_trusted(&cache, &unplaced);
                 }
