@@ -68,18 +68,33 @@ fn params(resolution: f64) -> MapParams {
     p
 }
 
-fn run(bencher: Bencher, scans: Vec<ScanInput>, resolution: f64, label: &str) {
+fn run(bencher: Bencher, scans: Vec<ScanInput>, resolution: f64, label: &str, truth: &[Pose]) {
     if scans.is_empty() {
         return;
     }
     let m = build_map(&scans, &params(resolution), |_, _| {}).unwrap();
+    // Largest position error of a placed scan against the truth (in the first scan's frame).
+    let worst = m
+        .placed
+        .iter()
+        .filter(|_| !truth.is_empty())
+        .map(|p| {
+            let t = truth[0].inverse() * truth[p.index];
+            (t.translation() - p.pose.translation()).norm()
+        })
+        .fold(0.0, f64::max);
     eprintln!(
-        "[{label}] {} of {} placed, {} registrations, {:.2} s ({:.3} s per scan)",
+        "[{label}] {} of {} placed, {} registrations, {:.2} s ({:.3} s per scan), worst error {}",
         m.placed.len(),
         scans.len(),
         m.registrations,
         m.seconds,
-        m.seconds / scans.len() as f64
+        m.seconds / scans.len() as f64,
+        if truth.is_empty() {
+            "n/a".to_string()
+        } else {
+            format!("{worst:.3} m")
+        }
     );
     bencher
         .counter(ItemsCount::new(scans.len()))
@@ -94,6 +109,7 @@ fn threedtk_batch(bencher: Bencher, odometry: bool) {
         threedtk(odometry),
         0.1,
         &format!("3dtk odometry={odometry}"),
+        &[],
     );
 }
 
@@ -105,6 +121,7 @@ fn hall_batch_no_odometry(bencher: Bencher, n: usize) {
         synthetic(n, false),
         0.2,
         &format!("hall {n} no odometry"),
+        &hall_trajectory(n, 0.9),
     );
 }
 
@@ -116,5 +133,6 @@ fn hall_batch_odometry(bencher: Bencher, n: usize) {
         synthetic(n, true),
         0.2,
         &format!("hall {n} odometry"),
+        &hall_trajectory(n, 0.9),
     );
 }

@@ -130,6 +130,9 @@ pub struct MapBuild {
 /// the scan's footprint in the map at the result.
 type CacheEntry = (Registration, bool, Option<Aabb>);
 
+/// How many stale scans the batch mapper retries before looking for a trusted result.
+const RETRY_GROUP: usize = 4;
+
 struct State<'a> {
     scans: &'a [ScanInput],
     params: &'a MapParams,
@@ -195,12 +198,13 @@ impl State<'_> {
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
                 self.registrations += 1;
-                let r = register_to(
+                let mut r = register_to(
                     &self.scans[s].cloud,
                     &self.target,
                     &self.refine_map,
                     &params,
                 )?;
+                check_odometry(&mut r, &prior, tolerance);
                 if r.trusted {
                     return Ok((r, false));
                 }
@@ -224,14 +228,8 @@ impl State<'_> {
             &params,
         )?;
         if let Some((prior, distance)) = prediction {
-            let off = (r.pose.translation() - prior.translation()).norm();
             let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
-            if r.trusted && off > tolerance {
-                r.trusted = false;
-                r.doubts.push(format!(
-                    "the global match is {off:.2} m from the odometry prediction (tolerance {tolerance:.2} m)"
-                ));
-            }
+            check_odometry(&mut r, &prior, tolerance);
         }
         match best {
             Some(b) if !r.trusted && b.search.overlap > r.search.overlap => Ok((b, false)),
@@ -269,6 +267,31 @@ impl State<'_> {
         Ok(self.target.pyramid().base().overlap(list, pose)? as f64 / n)
     }
 
+    /// How near scan `s` probably is to the placed scans, smaller first: with odometry,
+    /// `(false, metres)` from its predicted position to the nearest placed scan; without,
+    /// `(true, index gap)` to the nearest placed scan in the input (usually capture order).
+    fn nearness(&self, s: usize) -> (bool, f64) {
+        let placed = self
+            .poses
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.map(|p| (i, p)));
+        match self.predict(s) {
+            Some((prior, _)) => (
+                false,
+                placed
+                    .map(|(_, p)| (p.translation() - prior.translation()).norm())
+                    .fold(f64::INFINITY, f64::min),
+            ),
+            None => (
+                true,
+                placed
+                    .map(|(i, _)| i.abs_diff(s) as f64)
+                    .fold(f64::INFINITY, f64::min),
+            ),
+        }
+    }
+
     /// Whether odometry puts scan `s` clearly outside the map so far (its predicted
     /// footprint, widened by every window and tolerance, misses the map's box): no search
     /// can succeed yet, so the batch mapper does not spend one.
@@ -301,6 +324,18 @@ impl State<'_> {
             .voxel_downsample(self.params.refine_map_voxel)?;
         self.poses[s] = Some(pose);
         Ok(())
+    }
+}
+
+/// Distrusts a registration farther than `tolerance` metres from the odometry prediction
+/// `prior` (a window search snaps to coarse cells and can end past its nominal edge).
+fn check_odometry(r: &mut Registration, prior: &Pose, tolerance: f64) {
+    let off = (r.pose.translation() - prior.translation()).norm();
+    if r.trusted && off > tolerance {
+        r.trusted = false;
+        r.doubts.push(format!(
+            "the match is {off:.2} m from the odometry prediction (tolerance {tolerance:.2} m)"
+        ));
     }
 }
 
@@ -443,19 +478,36 @@ pub fn build_map(
                     // Nothing trusted: retry every scan last tried against a smaller map
                     // (all of them: stopping at the first trusted one let a false match in
                     // the synthetic hall win over the true, better one).
-                    let stale: Vec<usize> = unplaced
+                    // Input order is usually capture order, so scans next (by index) to
+                    // placed ones go first, a few at a time, the best of a group winning:
+                    // each retry round costs a few searches, not one per unplaced scan.
+                    let mut stale: Vec<usize> = unplaced
                         .iter()
                         .copied()
                         .filter(|&s| attempted_at[s] < placed_now)
                         .collect();
-                    for &s in &stale {
-                        far[s] = state.far_from_map(s);
-                        attempted_at[s] = placed_now;
-                        if !far[s] {
-                            cache[s] = Some(state.attempt(s, false)?);
+                    let keys: Vec<(bool, f64)> = stale.iter().map(|&s| state.nearness(s)).collect();
+                    let mut by_key: Vec<(usize, (bool, f64))> =
+                        stale.iter().copied().zip(keys).collect();
+                    by_key.sort_by(|a, b| {
+                        (a.1 .0, a.1 .1, a.0)
+                            .partial_cmp(&(b.1 .0, b.1 .1, b.0))
+                            .unwrap_or(std::cmp::Ordering::Equal)
+                    });
+                    stale = by_key.into_iter().map(|(s, _)| s).collect();
+                    for group in stale.chunks(RETRY_GROUP) {
+                        for &s in group {
+                            far[s] = state.far_from_map(s);
+                            attempted_at[s] = placed_now;
+                            if !far[s] {
+                                cache[s] = Some(state.attempt(s, false)?);
+                            }
+                        }
+                        best = best_trusted(&cache, &unplaced);
+                        if best.is_some() {
+                            break;
                         }
                     }
-                    best = best_trusted(&cache, &unplaced);
                 }
                 if best.is_none() {
                     // Last resort before giving up: odometry may be wrong, search anyway.
