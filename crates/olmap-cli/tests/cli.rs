@@ -358,8 +358,33 @@ fn map_a_3dtk_folder_then_eval_and_export() {
         poses.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
+        "--scans-out",
+        dir.path().join("scans").to_str().unwrap(),
     ]));
     assert_eq!(v["placed"].as_array().unwrap().len(), 3);
+    // The scan-pose pairs: one list per scan and the same poses.
+    for i in 0..3 {
+        let l = olmap::occupancy::OccupancyList::read_olm_path(
+            dir.path().join(format!("scans/scan00{i}.olm")),
+        )
+        .unwrap();
+        // The scan's own voxels, less the few its own rays cleared (mixed pixels).
+        let cloud = olmap::io::read_cloud(folder.join(format!("scan00{i}.3d")))
+            .unwrap()
+            .cloud;
+        let hit = olmap::occupancy::OccupancyList::from_cloud(&cloud, 0.1)
+            .unwrap()
+            .len();
+        assert!(
+            l.len() <= hit && l.len() as f64 > 0.8 * hit as f64,
+            "{} of {hit}",
+            l.len()
+        );
+    }
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("scans/poses.txt")).unwrap(),
+        std::fs::read_to_string(&poses).unwrap()
+    );
     assert!(v["rejected"].as_array().unwrap().is_empty());
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();

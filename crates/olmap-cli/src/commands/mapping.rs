@@ -44,6 +44,11 @@ pub struct MapArgs {
     /// Write the scan poses `T_map_scan` as a pose list.
     #[arg(long, value_name = "FILE")]
     pub poses_out: Option<PathBuf>,
+    /// Write each placed scan's own occupancy list (sensor frame) as NAME.olm into this
+    /// folder, with their poses in poses.txt: the scan-pose pairs the map can be rebuilt
+    /// from when poses change.
+    #[arg(long, value_name = "DIR")]
+    pub scans_out: Option<PathBuf>,
     /// Write a JSON report (placed and rejected scans, reasons, timings).
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
@@ -219,6 +224,7 @@ pub fn run_map(a: &MapArgs) -> anyhow::Result<ExitCode> {
         },
         bucket_radius: a.bucket_radius,
         min_count: a.min_count,
+        keep_scan_maps: a.scans_out.is_some(),
         ..Default::default()
     };
     let bar = progress(scans.len() as u64, "map", a.json);
@@ -231,6 +237,15 @@ pub fn run_map(a: &MapArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(out) = &a.poses_out {
         poses.write_path(out)?;
+    }
+    if let Some(dir) = &a.scans_out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        for s in &built.scan_maps {
+            s.voxels
+                .write_olm_path(dir.join(format!("{}.olm", s.name)))?;
+        }
+        poses.write_path(dir.join("poses.txt"))?;
     }
     let report = json!({
         "output": a.output.display().to_string(),

@@ -60,6 +60,10 @@ pub struct MapParams {
     /// scan it was predicted from (default 2 m). Odometry is not trusted blindly, nor is a
     /// global match that contradicts it by tens of metres (a repetitive building).
     pub odometry_tolerance: f64,
+    /// Keep each placed scan's own ray-traced occupancy list, in its sensor frame, in
+    /// [`MapBuild::scan_maps`] (the thesis' scan-pose pairs, so the map can be rebuilt
+    /// when poses change; default true; costs one more ray trace and the lists' memory).
+    pub keep_scan_maps: bool,
 }
 
 impl Default for MapParams {
@@ -74,6 +78,7 @@ impl Default for MapParams {
             min_count: 1,
             refine_map_voxel: 0.05,
             odometry_tolerance: 2.0,
+            keep_scan_maps: true,
         }
     }
 }
@@ -110,6 +115,43 @@ pub struct RejectedScan {
     pub reasons: Vec<String>,
 }
 
+/// A placed scan's own occupancy list and its pose: what the map can be rebuilt from.
+#[derive(Debug, Clone)]
+pub struct ScanMap {
+    /// The scan's name.
+    pub name: String,
+    /// `T_map_scan`.
+    pub pose: Pose,
+    /// The scan ray traced alone, in its sensor frame (counts, free space cleared).
+    pub voxels: OccupancyList,
+}
+
+/// Rebuilds a fused map from scan-pose pairs: each scan's list moved to its pose (voxel
+/// centres re-binned, so a voxel can shift by one cell) and the counts added. Use it after
+/// changing poses; [`build_map`]'s own fused map ray traces the points instead (exact).
+///
+/// ```
+/// use olmap::geometry::Pose;
+/// use olmap::mapping::{fuse_scan_maps, ScanMap};
+/// use olmap::occupancy::OccupancyList;
+/// # use nalgebra::Point3;
+/// let mut voxels = OccupancyList::new(0.1).unwrap();
+/// voxels.set(voxels.key_of(&Point3::new(1.05, 0.05, 0.05)).unwrap(), 2).unwrap();
+/// let scans = [ScanMap { name: "a".into(), pose: Pose::from_xyz_ypr(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), voxels }];
+/// let map = fuse_scan_maps(&scans).unwrap();
+/// assert_eq!(map.count_at(&Point3::new(2.05, 0.05, 0.05)), 2);
+/// ```
+pub fn fuse_scan_maps(scans: &[ScanMap]) -> Result<OccupancyList> {
+    let Some(first) = scans.first() else {
+        return Err(Error::InvalidArgument("no scan maps to fuse".into()));
+    };
+    let mut map = OccupancyList::new(first.voxels.resolution())?;
+    for s in scans {
+        map.merge(&s.voxels.transformed(&s.pose))?;
+    }
+    Ok(map)
+}
+
 /// The result of [`build_map`].
 #[derive(Debug, Clone)]
 pub struct MapBuild {
@@ -119,6 +161,9 @@ pub struct MapBuild {
     pub placed: Vec<PlacedScan>,
     /// Scans left out.
     pub rejected: Vec<RejectedScan>,
+    /// Each placed scan's own occupancy list with its pose, in joining order (empty unless
+    /// [`MapParams::keep_scan_maps`]).
+    pub scan_maps: Vec<ScanMap>,
     /// Registrations run (a measure of work: the batch mapper reuses results whose map
     /// region did not change).
     pub registrations: usize,
@@ -582,8 +627,19 @@ pub fn build_map(
     // Fuse the placed scans by ray tracing, in the order they joined.
     let mut map = OccupancyList::new(res)?;
     let mut buckets = PositionBuckets::new(params.bucket_radius)?;
+    let mut scan_maps = Vec::new();
     for p in &placed {
         let cloud = &scans[p.index].cloud;
+        if params.keep_scan_maps {
+            let mut voxels = OccupancyList::new(res)?;
+            voxels.insert_scan(cloud, &Pose::identity(), &params.sensor)?;
+            voxels.shrink_to_fit();
+            scan_maps.push(ScanMap {
+                name: p.name.clone(),
+                pose: p.pose,
+                voxels,
+            });
+        }
         if params.bucket_radius > 0.0 && !buckets.admit(&p.pose.transform_point(&cloud.origin())) {
             continue;
         }
@@ -597,6 +653,7 @@ pub fn build_map(
         map,
         placed,
         rejected,
+        scan_maps,
         registrations: state.registrations,
         seconds: start.elapsed().as_secs_f64(),
     })

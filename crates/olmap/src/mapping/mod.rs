@@ -4,7 +4,10 @@
 mod builder;
 mod eval;
 
-pub use builder::{build_map, MapBuild, MapMode, MapParams, PlacedScan, RejectedScan, ScanInput};
+pub use builder::{
+    build_map, fuse_scan_maps, MapBuild, MapMode, MapParams, PlacedScan, RejectedScan, ScanInput,
+    ScanMap,
+};
 pub use eval::{
     evaluate, ErrorSummary, Evaluation, ScanError, EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
 };

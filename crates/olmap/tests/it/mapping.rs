@@ -71,6 +71,34 @@ fn threedtk_batch_map_with_and_without_odometry() {
             if odometry { "odometry" } else { "no odometry" },
         );
         assert!(m.map.len() > 10_000);
+        // The scan-pose pairs rebuild the map: every rebuilt voxel lies within one cell
+        // (re-binning) of a voxel of the ray-traced map, but for the few the other scans
+        // saw through (cross-scan clearing, which the per-scan lists cannot apply).
+        assert_eq!(m.scan_maps.len(), 3);
+        let rebuilt = olmap::mapping::fuse_scan_maps(&m.scan_maps).unwrap();
+        let near = rebuilt
+            .iter()
+            .filter(|(k, _)| {
+                (-1..=1).any(|dx| {
+                    (-1..=1).any(|dy| {
+                        (-1..=1).any(|dz| {
+                            m.map.count(olmap::geometry::VoxelKey::new(
+                                k.x + dx,
+                                k.y + dy,
+                                k.z + dz,
+                            )) > 0
+                        })
+                    })
+                })
+            })
+            .count();
+        let share = near as f64 / rebuilt.len() as f64;
+        eprintln!(
+            "rebuilt {} voxels, {:.3} near the ray-traced map",
+            rebuilt.len(),
+            share
+        );
+        assert!(share > 0.9, "{share}");
         if odometry {
             assert!(
                 m.placed.iter().all(|p| !p.global),
