@@ -1,0 +1,12 @@
+//! The built-in simulator: indoor worlds of solids, ray-cast scanners (rotating-mirror 3D,
+//! 2D, multi-beam lidar), robots with beacons and odometry, sightings between robots, and
+//! datasets on disk (thesis §3.4.1, §4.3-4.4, §6.5). It gives olmap a default dataset with
+//! ground truth for the parts of the mission no public data covers.
+
+mod rng;
+mod shape;
+mod world;
+
+pub use rng::{mix64, SimRng};
+pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
+pub use world::{room_shell, World};
