@@ -262,17 +262,20 @@ fn ray_box(
 ) -> bool {
     let (mut t0, mut t1) = (0.0f64, limit);
     for a in 0..3 {
+        if inv[a].is_infinite() {
+            // Parallel to the slab: inside it (faces included) or a miss. The product
+            // below would be NaN for an origin on a face.
+            if o[a] < min[a] || o[a] > max[a] {
+                return false;
+            }
+            continue;
+        }
         let (mut ta, mut tb) = ((min[a] - o[a]) * inv[a], (max[a] - o[a]) * inv[a]);
         if ta > tb {
             std::mem::swap(&mut ta, &mut tb);
         }
-        // NaN (0 * inf on a face) compares false and leaves the interval unchanged.
-        if ta > t0 {
-            t0 = ta;
-        }
-        if tb < t1 {
-            t1 = tb;
-        }
+        t0 = t0.max(ta);
+        t1 = t1.min(tb);
         if t0 > t1 {
             return false;
         }
