@@ -6,7 +6,9 @@
 mod rng;
 mod shape;
 mod world;
+mod worlds;
 
 pub use rng::{mix64, SimRng};
 pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
 pub use world::{room_shell, World};
+pub use worlds::{box_room, corridor, free_spot, lab, office, WorldKind};
