@@ -276,8 +276,8 @@ pub fn corridor(seed: u64) -> World {
 /// 4.8 m zones separated by 1.6 m aisles, so robots can drive around every group. Three
 /// floor-to-ceiling pillars (radius 0.3 m) stand at fixed, asymmetric places (jittered by
 /// the seed). Each zone holds one furniture group picked by the seed (a row of desks
-/// with chairs, a yawed table with things on it, tall shelves, cabinets, or clutter boxes
-/// and bins), and one zone is left empty.
+/// with chairs, a yawed table with things on it, tall shelves, cabinets, or clutter boxes),
+/// up to two more loose boxes and maybe a bin; one zone is left empty.
 pub fn lab(seed: u64) -> World {
     let mut rng = SimRng::new(seed);
     let (size, height) = (20.0, 3.0);
@@ -355,6 +355,8 @@ pub fn lab(seed: u64) -> World {
                 clutter(&mut rng, &mut layout, &z, &mut o, n);
             }
         }
+        let extra = rng.index(3);
+        clutter(&mut rng, &mut layout, &z, &mut o, extra);
         if rng.chance(0.5) {
             let g = layout.place(&mut rng, &z, 0.3, |r| {
                 let (x, y) = z.sample(r);
