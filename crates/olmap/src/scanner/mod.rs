@@ -175,10 +175,11 @@ impl MirrorGeometry {
         if self.ticks_per_revolution == 0 {
             return bad("ticks_per_revolution must be > 0");
         }
-        if !self.trigger_angle.is_finite()
-            || !self.scan_angle_min.is_finite()
-            || !(self.scan_angle_step.is_finite() && self.scan_angle_step > 0.0)
-        {
+        let angles_ok = self.trigger_angle.is_finite()
+            && self.scan_angle_min.is_finite()
+            && self.scan_angle_step.is_finite()
+            && self.scan_angle_step > 0.0;
+        if !angles_ok {
             return bad("trigger and scan angles must be finite, the step > 0");
         }
         if self.scan_beams == 0 {
@@ -190,7 +191,7 @@ impl MirrorGeometry {
         if !(self.edge_on_margin >= 0.0 && self.back_margin >= 0.0) {
             return bad("margins must be >= 0");
         }
-        if !(self.max_range > 0.0) {
+        if self.max_range.is_nan() || self.max_range <= 0.0 {
             return bad("max_range must be > 0");
         }
         Ok(())
