@@ -37,7 +37,7 @@ const FORMAT: &str = "olmap laser scan CSV";
 /// use olmap::cloud::LaserScan;
 /// let scan = LaserScan {
 ///     angle_min: -0.5,
-///     angle_increment: 0.5,
+///     angle_increment: 0.25,
 ///     range_min: 0.1,
 ///     range_max: 8.0,
 ///     ranges: vec![2.0, f32::INFINITY, 3.0],
@@ -46,7 +46,8 @@ const FORMAT: &str = "olmap laser scan CSV";
 /// };
 /// let cloud = scan.to_cloud();
 /// assert_eq!(cloud.len(), 2);
-/// assert_eq!(cloud.points()[1].x, 3.0);
+/// assert_eq!(cloud.points()[1].x, 3.0); // beam 2 points along x
+/// assert_eq!(cloud.intensity().unwrap(), &[0.5, 2.0]);
 /// let mut csv = Vec::new();
 /// scan.write_csv(&mut csv).unwrap();
 /// assert_eq!(LaserScan::read_csv(&csv[..]).unwrap(), scan);
