@@ -43,6 +43,7 @@ pub mod geometry;
 pub mod io;
 pub mod mapping;
 pub mod occupancy;
+pub mod scanner;
 pub mod sim;
 pub mod test_data;
 

@@ -5,8 +5,10 @@
 //! Filters return new clouds and keep every attribute in step with the positions.
 
 mod filters;
+mod laser_scan;
 mod point_cloud;
 mod stats;
 
+pub use laser_scan::LaserScan;
 pub use point_cloud::PointCloud;
 pub use stats::{CloudStats, RangeStats};

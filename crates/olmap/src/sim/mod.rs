@@ -4,11 +4,15 @@
 //! ground truth for the parts of the mission no public data covers.
 
 mod rng;
+mod scanners;
 mod shape;
 mod world;
 mod worlds;
 
 pub use rng::{mix64, SimRng};
+pub use scanners::{
+    MirrorScanner, PlanarScanner, RangeNoise, SpinningLidar, RETRO_INTENSITY, RETRO_MAX_INCIDENCE,
+};
 pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
 pub use world::{room_shell, World};
 pub use worlds::{box_room, corridor, free_spot, lab, office, WorldKind};

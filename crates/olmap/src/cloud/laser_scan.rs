@@ -1,0 +1,263 @@
+//! The [`LaserScan`] type: one sweep of a 2D laser scanner, like ROS
+//! `sensor_msgs/LaserScan`, and its CSV file layout.
+//!
+//! ## CSV layout (version 1)
+//! ```text
+//! # olmap laser scan v1
+//! angle_min,angle_increment,range_min,range_max,time
+//! -1.5707963267948966,0.008726646259971648,0.0,8.0,12.5
+//! range,intensity
+//! 2.5,0.6
+//! inf,0.0
+//! ```
+//! Line 1 is the comment `# olmap laser scan v1`; line 2 the header of the scan's
+//! parameters and line 3 their values (radians, metres, seconds); line 4 is `range,intensity`
+//! (or `range` for a scan without intensities); then one row per beam in angle order,
+//! `inf` marking a beam with no return. Blank lines and further `#` lines are skipped.
+//! Numbers are written in Rust's shortest round-trip form, so reading a written scan gives
+//! it back bit for bit. Reading a malformed file gives a [`ParseError`] naming the line.
+
+use std::io::{BufRead, Write};
+use std::path::Path;
+
+use nalgebra::Point3;
+
+use super::PointCloud;
+use crate::error::{ParseError, Result};
+use crate::io::text::for_each_line;
+
+const MAGIC: &str = "# olmap laser scan v1";
+const PARAMS: &str = "angle_min,angle_increment,range_min,range_max,time";
+const FORMAT: &str = "olmap laser scan CSV";
+
+/// One sweep of a 2D laser scanner in its own plane (the sensor's xy plane; beam `i` points
+/// at angle `angle_min + i angle_increment` from x toward y).
+///
+/// ```
+/// use olmap::cloud::LaserScan;
+/// let scan = LaserScan {
+///     angle_min: -0.5,
+///     angle_increment: 0.25,
+///     range_min: 0.1,
+///     range_max: 8.0,
+///     ranges: vec![2.0, f32::INFINITY, 3.0],
+///     intensities: Some(vec![0.5, 0.0, 2.0]),
+///     time: 0.0,
+/// };
+/// let cloud = scan.to_cloud();
+/// assert_eq!(cloud.len(), 2);
+/// assert_eq!(cloud.points()[1].x, 3.0); // beam 2 points along x
+/// assert_eq!(cloud.intensity().unwrap(), &[0.5, 2.0]);
+/// let mut csv = Vec::new();
+/// scan.write_csv(&mut csv).unwrap();
+/// assert_eq!(LaserScan::read_csv(&csv[..]).unwrap(), scan);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaserScan {
+    /// Angle of the first beam, radians (0 along the sensor's x axis, positive toward y).
+    pub angle_min: f64,
+    /// Angle between consecutive beams, radians.
+    pub angle_increment: f64,
+    /// Shortest valid range, metres.
+    pub range_min: f64,
+    /// Longest valid range, metres.
+    pub range_max: f64,
+    /// Ranges in beam order, metres; `f32::INFINITY` (or any value outside
+    /// `[range_min, range_max]`) for no valid return.
+    pub ranges: Vec<f32>,
+    /// Intensities, one per beam, if the scanner reports them.
+    pub intensities: Option<Vec<f32>>,
+    /// When the scan was taken, seconds.
+    pub time: f64,
+}
+
+impl LaserScan {
+    /// Angle of beam `i`, radians.
+    pub fn angle(&self, i: usize) -> f64 {
+        self.angle_min + i as f64 * self.angle_increment
+    }
+
+    /// Number of beams.
+    pub fn len(&self) -> usize {
+        self.ranges.len()
+    }
+
+    /// Whether the scan has no beams.
+    pub fn is_empty(&self) -> bool {
+        self.ranges.is_empty()
+    }
+
+    /// Whether beam `i` has a valid return (finite, within `[range_min, range_max]`).
+    pub fn is_valid(&self, i: usize) -> bool {
+        let r = self.ranges[i] as f64;
+        r.is_finite() && r >= self.range_min && r <= self.range_max
+    }
+
+    /// The valid returns as points in the sensor plane (`z = 0`), with their intensities
+    /// when the scan has them; the cloud's origin is the sensor.
+    pub fn to_cloud(&self) -> PointCloud {
+        let mut pts = Vec::new();
+        let mut ints = Vec::new();
+        for i in 0..self.len() {
+            if !self.is_valid(i) {
+                continue;
+            }
+            let r = self.ranges[i] as f64;
+            let (s, c) = self.angle(i).sin_cos();
+            pts.push(Point3::new((r * c) as f32, (r * s) as f32, 0.0));
+            if let Some(v) = &self.intensities {
+                ints.push(v[i]);
+            }
+        }
+        let mut cloud = PointCloud::from_points(pts);
+        if self.intensities.is_some() {
+            cloud
+                .set_intensity(Some(ints))
+                .expect("one intensity per point");
+        }
+        cloud
+    }
+
+    /// Writes the scan as CSV (see the module documentation).
+    pub fn write_csv<W: Write>(&self, mut w: W) -> std::io::Result<()> {
+        writeln!(w, "{MAGIC}")?;
+        writeln!(w, "{PARAMS}")?;
+        writeln!(
+            w,
+            "{:?},{:?},{:?},{:?},{:?}",
+            self.angle_min, self.angle_increment, self.range_min, self.range_max, self.time
+        )?;
+        match &self.intensities {
+            Some(ints) => {
+                if ints.len() != self.ranges.len() {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::InvalidInput,
+                        format!(
+                            "laser scan has {} ranges but {} intensities",
+                            self.ranges.len(),
+                            ints.len()
+                        ),
+                    ));
+                }
+                writeln!(w, "range,intensity")?;
+                for (r, v) in self.ranges.iter().zip(ints) {
+                    writeln!(w, "{r:?},{v:?}")?;
+                }
+            }
+            None => {
+                writeln!(w, "range")?;
+                for r in &self.ranges {
+                    writeln!(w, "{r:?}")?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads a scan from CSV (see the module documentation).
+    pub fn read_csv<R: BufRead>(reader: R) -> Result<Self, ParseError> {
+        // Stage: 0 magic, 1 parameter header, 2 parameter values, 3 column header, 4 rows.
+        let mut stage = 0;
+        let mut params = [0.0f64; 5];
+        let mut with_int = false;
+        let mut ranges = Vec::new();
+        let mut ints = Vec::new();
+        for_each_line(reader, |n, line| {
+            let t = line.trim();
+            if stage == 0 {
+                if t != MAGIC {
+                    return Err(ParseError::line(
+                        n,
+                        format!("expected the first line '{MAGIC}', found '{t}'"),
+                    ));
+                }
+                stage = 1;
+                return Ok(());
+            }
+            if t.is_empty() || t.starts_with('#') {
+                return Ok(());
+            }
+            let fields: Vec<&str> = t.split(',').map(str::trim).collect();
+            match stage {
+                1 => {
+                    if t.replace(' ', "") != PARAMS {
+                        return Err(ParseError::line(n, format!("expected '{PARAMS}'")));
+                    }
+                }
+                2 => {
+                    if fields.len() != 5 {
+                        return Err(ParseError::line(
+                            n,
+                            format!("expected 5 values ({PARAMS}), found {}", fields.len()),
+                        ));
+                    }
+                    for (k, f) in fields.iter().enumerate() {
+                        params[k] = f.parse::<f64>().map_err(|_| {
+                            ParseError::line(n, format!("value {} is not a number: '{f}'", k + 1))
+                        })?;
+                    }
+                }
+                3 => {
+                    with_int = match fields.as_slice() {
+                        ["range", "intensity"] => true,
+                        ["range"] => false,
+                        _ => {
+                            return Err(ParseError::line(
+                                n,
+                                "expected the column header 'range,intensity' or 'range'",
+                            ))
+                        }
+                    };
+                }
+                _ => {
+                    let want = if with_int { 2 } else { 1 };
+                    if fields.len() != want {
+                        return Err(ParseError::line(
+                            n,
+                            format!("expected {want} values, found {}", fields.len()),
+                        ));
+                    }
+                    let parse = |f: &str| {
+                        f.parse::<f32>()
+                            .map_err(|_| ParseError::line(n, format!("not a number: '{f}'")))
+                    };
+                    ranges.push(parse(fields[0])?);
+                    if with_int {
+                        ints.push(parse(fields[1])?);
+                    }
+                    return Ok(());
+                }
+            }
+            stage += 1;
+            Ok(())
+        })?;
+        match stage {
+            0 => return Err(ParseError::Empty),
+            1..=3 => {
+                return Err(ParseError::Truncated(
+                    "the scan's parameter or column header lines are missing".into(),
+                ))
+            }
+            _ => {}
+        }
+        Ok(LaserScan {
+            angle_min: params[0],
+            angle_increment: params[1],
+            range_min: params[2],
+            range_max: params[3],
+            time: params[4],
+            ranges,
+            intensities: with_int.then_some(ints),
+        })
+    }
+
+    /// Writes the scan as CSV to a file atomically.
+    pub fn write_csv_path(&self, path: impl AsRef<Path>) -> Result<()> {
+        crate::io::write_atomic(path.as_ref(), FORMAT, |w| self.write_csv(w))
+    }
+
+    /// Reads a scan from a CSV file; errors name the file and the line.
+    pub fn read_csv_path(path: impl AsRef<Path>) -> Result<Self> {
+        crate::io::parse_file(path.as_ref(), FORMAT, Self::read_csv)
+    }
+}
