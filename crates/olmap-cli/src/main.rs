@@ -50,6 +50,9 @@ enum Command {
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
+    /// Generate a multi-robot dataset in a simulated world: scans, odometry, ground truth,
+    /// sightings between robots (and optionally 2D scans and raw mirror-scanner logs).
+    Simulate(commands::simulate::SimulateArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
 }
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Command::Voxelize(a) => commands::voxelize::run(&a),
         Command::Export(a) => commands::map::export(&a),
         Command::Merge(a) => commands::map::merge(&a),
+        Command::Simulate(a) => commands::simulate::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
     };
     match result {

@@ -423,3 +423,46 @@ fn map_a_3dtk_folder_then_eval_and_export() {
     let ply = olmap::io::read_cloud(dir.path().join("map.ply")).unwrap();
     assert_eq!(ply.cloud.len(), loaded.len());
 }
+
+#[test]
+fn simulate_writes_a_dataset_and_refuses_to_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim");
+    let args = [
+        "simulate",
+        "--json",
+        "--world",
+        "box-room",
+        "--robots",
+        "2",
+        "--scans-per-robot",
+        "2",
+        "--scanner",
+        "lidar",
+        "--scans2d",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    let v = json(&olmap(&args));
+    assert_eq!(v["scans"], 4);
+    let back = olmap::io::sim_dataset::read_dataset(&out).unwrap();
+    assert_eq!(back.manifest.world, "box-room");
+    assert_eq!(back.manifest.robots[1].scans2d.len(), 2);
+    // In an empty room two robots 1 m or more apart see each other both ways.
+    assert_eq!(
+        v["mutual_sightings"].as_u64().unwrap(),
+        v["sightings"].as_u64().unwrap()
+    );
+    let points: u64 = (0..2)
+        .flat_map(|r| back.scan_paths(r))
+        .map(|p| olmap::io::read_cloud(&p).unwrap().cloud.len() as u64)
+        .sum();
+    assert_eq!(points, v["points"].as_u64().unwrap());
+    // Again into the same folder: refused, the folder untouched.
+    let before = std::fs::read(out.join("manifest.json")).unwrap();
+    let again = olmap(&args);
+    assert!(!again.status.success());
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(err.contains("not empty"), "{err}");
+    assert_eq!(std::fs::read(out.join("manifest.json")).unwrap(), before);
+}

@@ -73,6 +73,11 @@ pub struct MapArgs {
     /// Cleaning: drop voxels with a count below this (pixel mixing).
     #[arg(long, default_value_t = 1)]
     pub min_count: u16,
+    /// Register with only the points between these heights in each scan's own frame,
+    /// metres, e.g. `0.1,2.8` to leave out the floor and the ceiling (flat surfaces match
+    /// anywhere and make the search ambiguous). The map keeps every point.
+    #[arg(long, value_name = "ZMIN,ZMAX")]
+    pub register_band: Option<String>,
     /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
     #[arg(long = "3dtk-valid")]
     pub threedtk_valid: bool,
@@ -225,6 +230,16 @@ pub fn run_map(a: &MapArgs) -> anyhow::Result<ExitCode> {
         bucket_radius: a.bucket_radius,
         min_count: a.min_count,
         keep_scan_maps: a.scans_out.is_some(),
+        register_band: match &a.register_band {
+            Some(s) => {
+                let [lo, hi] = crate::args::parse_numbers::<2>(s, "--register-band")?;
+                if lo >= hi {
+                    anyhow::bail!("--register-band: ZMIN must be below ZMAX, got {s}");
+                }
+                Some((lo, hi))
+            }
+            None => None,
+        },
         ..Default::default()
     };
     let bar = progress(scans.len() as u64, "map", a.json);

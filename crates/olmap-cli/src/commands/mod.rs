@@ -7,4 +7,5 @@ pub mod info;
 pub mod map;
 pub mod mapping;
 pub mod poses;
+pub mod simulate;
 pub mod voxelize;

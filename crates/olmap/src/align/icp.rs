@@ -212,6 +212,14 @@ pub struct IcpParams {
     /// straight corridor scores about 0.001, the weakest directions of the real test pairs
     /// 0.13-0.35.
     pub weak_fraction: f64,
+    /// Directions of the update whose eigenvalue (of the normal equations, in the same
+    /// centred and scaled coordinates) is below this fraction of the largest are not moved
+    /// at all ("solution remapping", Zhang, Kaess and Singh, ICRA 2016): a degenerate
+    /// direction keeps the initial pose's value instead of sliding on noise, and the rest
+    /// converges. In `[0, 1)`; default `0.02`, like [`IcpParams::weak_fraction`]: below the
+    /// real pairs' weakest directions (0.13-0.35), above a corridor's free axis (~0.001) and
+    /// the free height of scans cut to a height band (~0.013); `0` disables it.
+    pub degenerate_fraction: f64,
 }
 
 impl Default for IcpParams {
@@ -234,6 +242,7 @@ impl Default for IcpParams {
             rotation_epsilon: 1e-5,
             min_correspondence_fraction: 0.05,
             weak_fraction: 0.02,
+            degenerate_fraction: 0.02,
         }
     }
 }
@@ -303,6 +312,12 @@ impl IcpParams {
             self.min_correspondence_fraction,
         )?;
         unit("weak_fraction", self.weak_fraction)?;
+        if !(0.0..1.0).contains(&self.degenerate_fraction) {
+            return bad(format!(
+                "degenerate_fraction must be in [0, 1), got {}",
+                self.degenerate_fraction
+            ));
+        }
         Ok(())
     }
 }
@@ -477,6 +492,7 @@ pub fn refine(
         let min_matches =
             ((params.min_correspondence_fraction * src.points.len() as f64).ceil() as usize).max(6);
         let mut d = params.max_distance_start;
+        let mut two_back: Option<Isometry3<f64>> = None;
         for _ in 0..params.max_iterations {
             iterations += 1;
             let at_end = d <= params.max_distance_end;
@@ -494,7 +510,18 @@ pub fn refine(
             if acc.matched < min_matches {
                 break;
             }
-            let Some(delta) = solve(&acc.h, &acc.g) else {
+            // RMS distance of the (moved) source from each axis through its centre: the
+            // scale at which the degenerate directions are judged, as in `Degeneracy`.
+            let cov = pose.rotation.to_rotation_matrix()
+                * src.cov
+                * pose.rotation.to_rotation_matrix().transpose();
+            let axis_rms = Vector3::from_fn(|k, _| (cov.trace() - cov[(k, k)]).max(1e-6).sqrt());
+            let Some(delta) = solve(
+                &acc.h,
+                &acc.g,
+                params.degenerate_fraction,
+                &(axis_rms / src.radius),
+            ) else {
                 break;
             };
             // The update in the centred, scaled coordinates: `w_scaled = ω · L`, `v` = motion of
@@ -513,6 +540,7 @@ pub fn refine(
             let omega = w_scaled / src.radius;
             let rot = UnitQuaternion::from_scaled_axis(omega);
             let t = centre.coords + v - rot * centre.coords;
+            let before = pose;
             pose = Isometry3::from_parts(Translation3::from(t), rot) * pose;
             if at_end
                 && v.norm() < params.translation_epsilon
@@ -521,6 +549,21 @@ pub fn refine(
                 converged = true;
                 break;
             }
+            // A two-step cycle (nearest neighbours flipping between two sets) at the final
+            // distance is as settled as the estimate gets.
+            if at_end {
+                if let Some(p2) = two_back {
+                    let back: Isometry3<f64> = p2;
+                    let diff = back.inverse() * pose;
+                    if diff.translation.vector.norm() < params.translation_epsilon
+                        && diff.rotation.angle() < params.rotation_epsilon
+                    {
+                        converged = true;
+                        break;
+                    }
+                }
+            }
+            two_back = Some(before);
             // Schedule: shrink the distance once the estimate has settled at this one.
             if step < params.settle_fraction * d || params.settle_fraction >= 1.0 {
                 d = (d * params.distance_decay).max(params.max_distance_end);
@@ -571,6 +614,8 @@ struct Source {
     centroid: Point3<f64>,
     /// RMS distance from the centroid (at least 1 mm).
     radius: f64,
+    /// Covariance of the points (about the centroid).
+    cov: Matrix3<f64>,
 }
 
 fn prepare_source(source: &PointCloud, params: &IcpParams) -> Result<Source> {
@@ -594,9 +639,14 @@ fn prepare_source(source: &PointCloud, params: &IcpParams) -> Result<Source> {
         .map(|p| (p - centroid).norm_squared())
         .sum::<f64>()
         / n;
+    let cov = points.iter().fold(Matrix3::zeros(), |c, p| {
+        let d = p - centroid;
+        c + d * d.transpose()
+    }) / n;
     Ok(Source {
         points,
         centroid,
+        cov,
         radius: ms.sqrt().max(1e-3),
     })
 }
@@ -867,11 +917,48 @@ fn accumulate(
 }
 
 /// Solves `(H + μ I) δ = -g` by Cholesky with `μ = 1e-6 · mean diagonal`, growing `μ` a
-/// hundredfold while the factorisation fails. `None` when nothing works.
-fn solve(h: &Matrix6<f64>, g: &Vector6<f64>) -> Option<Vector6<f64>> {
+/// hundredfold while the factorisation fails. `None` when nothing works. When some
+/// eigenvalue of `H` is below `degenerate_fraction` of the largest, solves in the span of
+/// the well-determined eigenvectors only (no motion along the degenerate ones). The
+/// eigenvalues are compared with each rotation coordinate rescaled by `axis_scale` (the RMS
+/// distance of the points from that axis over the common radius), so that a unit step in
+/// any coordinate moves the points by about the same amount.
+fn solve(
+    h: &Matrix6<f64>,
+    g: &Vector6<f64>,
+    degenerate_fraction: f64,
+    axis_scale: &Vector3<f64>,
+) -> Option<Vector6<f64>> {
     let mean_diag = h.trace() / 6.0;
     if !(mean_diag.is_finite() && mean_diag > 0.0 && g.iter().all(|v| v.is_finite())) {
         return None;
+    }
+    if degenerate_fraction > 0.0 {
+        // δ = A u with A = diag(1 / axis_scale, 1, 1, 1): u moves points by metres RMS.
+        let a = Vector6::new(
+            1.0 / axis_scale.x,
+            1.0 / axis_scale.y,
+            1.0 / axis_scale.z,
+            1.0,
+            1.0,
+            1.0,
+        );
+        let hu = Matrix6::from_fn(|i, j| a[i] * h[(i, j)] * a[j]);
+        let gu = g.component_mul(&a);
+        let eig = hu.symmetric_eigen();
+        let max = eig.eigenvalues.max();
+        let floor = degenerate_fraction * max;
+        if max > 0.0 && eig.eigenvalues.iter().any(|&l| l < floor) {
+            let mut u = Vector6::zeros();
+            for (i, &l) in eig.eigenvalues.iter().enumerate() {
+                if l >= floor {
+                    let v = eig.eigenvectors.column(i);
+                    u -= v * (v.dot(&gu) / l);
+                }
+            }
+            let x = u.component_mul(&a);
+            return x.iter().all(|v| v.is_finite()).then_some(x);
+        }
     }
     let mut mu = 1e-6 * mean_diag;
     for _ in 0..8 {

@@ -29,6 +29,7 @@ pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
 pub mod scan_graph;
+pub mod sim_dataset;
 pub mod slam6d;
 pub(crate) mod text;
 pub mod uos;

@@ -64,6 +64,11 @@ pub struct MapParams {
     /// [`MapBuild::scan_maps`] (the thesis' scan-pose pairs, so the map can be rebuilt
     /// when poses change; default true; costs one more ray trace and the lists' memory).
     pub keep_scan_maps: bool,
+    /// Register with only the points whose height in their own scan frame lies in
+    /// `[z_min, z_max]` (e.g. above the floor and below the ceiling: flat floors and
+    /// ceilings match anywhere and make the search ambiguous; thesis §5.4, §6.4.2 use a
+    /// sub-ceiling band). The fused map keeps every point. Default `None` (all points).
+    pub register_band: Option<(f64, f64)>,
 }
 
 impl Default for MapParams {
@@ -79,6 +84,7 @@ impl Default for MapParams {
             refine_map_voxel: 0.05,
             odometry_tolerance: 2.0,
             keep_scan_maps: true,
+            register_band: None,
         }
     }
 }
@@ -180,6 +186,9 @@ const RETRY_GROUP: usize = 4;
 
 struct State<'a> {
     scans: &'a [ScanInput],
+    /// The clouds registration uses: the scans' points, cut to
+    /// [`MapParams::register_band`] when set.
+    clouds: Vec<std::borrow::Cow<'a, PointCloud>>,
     params: &'a MapParams,
     target: SearchTarget,
     refine_map: PointCloud,
@@ -243,12 +252,7 @@ impl State<'_> {
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
                 self.registrations += 1;
-                let mut r = register_to(
-                    &self.scans[s].cloud,
-                    &self.target,
-                    &self.refine_map,
-                    &params,
-                )?;
+                let mut r = register_to(&self.clouds[s], &self.target, &self.refine_map, &params)?;
                 check_odometry(&mut r, &prior, tolerance);
                 if r.trusted {
                     return Ok((r, false));
@@ -266,12 +270,7 @@ impl State<'_> {
         }
         params.search.region = Region::Global;
         self.registrations += 1;
-        let mut r = register_to(
-            &self.scans[s].cloud,
-            &self.target,
-            &self.refine_map,
-            &params,
-        )?;
+        let mut r = register_to(&self.clouds[s], &self.target, &self.refine_map, &params)?;
         if let Some((prior, distance)) = prediction {
             let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
             check_odometry(&mut r, &prior, tolerance);
@@ -285,7 +284,7 @@ impl State<'_> {
     /// [`State::register`] with the scan's footprint at the result: a batch cache entry.
     fn attempt(&mut self, s: usize, allow_global: bool) -> Result<CacheEntry> {
         let (r, global) = self.register(s, allow_global)?;
-        let fp = footprint(&self.scans[s].cloud, &r.pose);
+        let fp = footprint(&self.clouds[s], &r.pose);
         Ok((r, global, fp))
     }
 
@@ -297,12 +296,7 @@ impl State<'_> {
         params.search.prior = prior;
         params.search.region = Region::Window { xy, z, yaw };
         self.registrations += 1;
-        register_to(
-            &self.scans[s].cloud,
-            &self.target,
-            &self.refine_map,
-            &params,
-        )
+        register_to(&self.clouds[s], &self.target, &self.refine_map, &params)
     }
 
     /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
@@ -344,7 +338,7 @@ impl State<'_> {
         let (Some((prior, distance)), Some(map)) = (self.predict(s), self.map_box) else {
             return false;
         };
-        let Some(fp) = footprint(&self.scans[s].cloud, &prior) else {
+        let Some(fp) = footprint(&self.clouds[s], &prior) else {
             return false;
         };
         let margin = (4.0 * self.params.odometry_window.0)
@@ -358,7 +352,7 @@ impl State<'_> {
     }
 
     fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
-        let cloud = &self.scans[s].cloud;
+        let cloud = &self.clouds[s];
         if let Some(fp) = footprint(cloud, &pose) {
             self.map_box = Some(self.map_box.map_or(fp, |b| b.union(&fp)));
         }
@@ -434,8 +428,16 @@ pub fn build_map(
         .range
         .map_or(params.register.search.max_range, |r| r.max);
     let levels = params.register.search.levels_for(extent * 2.0, range);
+    let clouds = scans
+        .iter()
+        .map(|s| match params.register_band {
+            Some((lo, hi)) => std::borrow::Cow::Owned(s.cloud.z_band(lo, hi)),
+            None => std::borrow::Cow::Borrowed(&s.cloud),
+        })
+        .collect();
     let mut state = State {
         scans,
+        clouds,
         params,
         target: SearchTarget::from_scans(&[], res, levels)?,
         refine_map: PointCloud::new(),
@@ -579,11 +581,11 @@ pub fn build_map(
                     provisional[s] = false;
                     let confirmed = state.register_near(s, r.pose)?;
                     if !confirmed.trusted {
-                        let fpc = footprint(&scans[s].cloud, &confirmed.pose);
+                        let fpc = footprint(&state.clouds[s], &confirmed.pose);
                         cache[s] = Some((confirmed, global, fpc));
                         continue;
                     }
-                    let fpc = footprint(&scans[s].cloud, &confirmed.pose);
+                    let fpc = footprint(&state.clouds[s], &confirmed.pose);
                     (confirmed, global, fpc)
                 } else {
                     (r, global, fp)
@@ -601,7 +603,7 @@ pub fn build_map(
                     };
                     if touched {
                         if voxels[u].is_none() {
-                            voxels[u] = Some(OccupancyList::from_cloud(&scans[u].cloud, res)?);
+                            voxels[u] = Some(OccupancyList::from_cloud(&state.clouds[u], res)?);
                         }
                         let list = voxels[u].as_ref().expect("just set");
                         let entry = cache[u].as_mut().expect("touched");

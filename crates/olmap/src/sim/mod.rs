@@ -3,16 +3,24 @@
 //! datasets on disk (thesis §3.4.1, §4.3-4.4, §6.5). It gives olmap a default dataset with
 //! ground truth for the parts of the mission no public data covers.
 
+mod dataset;
 mod rng;
+mod robot;
 mod scanners;
 mod shape;
+mod sighting;
 mod world;
 mod worlds;
 
+pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
 pub use rng::{mix64, SimRng};
+pub use robot::{
+    odometry_for, plan_trajectories, BeaconMount, MotionModel, OdometryNoise, RobotModel,
+};
 pub use scanners::{
     MirrorScanner, PlanarScanner, RangeNoise, SpinningLidar, RETRO_INTENSITY, RETRO_MAX_INCIDENCE,
 };
 pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
+pub use sighting::{sightings_at, Sighting, SightingModel};
 pub use world::{room_shell, World};
 pub use worlds::{box_room, corridor, free_spot, lab, office, WorldKind};

@@ -8,6 +8,7 @@ mod mapping;
 mod occupancy;
 mod real_data;
 mod round_trip;
+mod sim_robots;
 mod sim_scanners;
 mod sim_world;
 
