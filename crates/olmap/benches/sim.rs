@@ -64,3 +64,13 @@ fn cast_loop(bencher: Bencher, name: &str) {
             .count()
     });
 }
+
+/// A whole dataset in memory: 4 robots x 20 stops in the lab with the enhanced mirror
+/// scanner (about 65,000 rays per scan), sightings included; counted in scans.
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn lab_dataset_4x20(bencher: Bencher) {
+    let config = olmap::sim::SimConfig::default();
+    bencher
+        .counter(ItemsCount::new(config.robots * config.stops))
+        .bench(|| olmap::sim::simulate(&config, |_, _| {}).unwrap());
+}
