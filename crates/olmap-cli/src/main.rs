@@ -50,6 +50,9 @@ enum Command {
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
+    /// The relative pose of two robots that see each other's beacon (mutual localisation,
+    /// thesis §3.3.1), with the distractor test and the expected error.
+    Mutual(commands::mutual::MutualArgs),
     /// Generate a multi-robot dataset in a simulated world: scans, odometry, ground truth,
     /// sightings between robots (and optionally 2D scans and raw mirror-scanner logs).
     Simulate(commands::simulate::SimulateArgs),
@@ -69,6 +72,7 @@ fn main() -> ExitCode {
         Command::Voxelize(a) => commands::voxelize::run(&a),
         Command::Export(a) => commands::map::export(&a),
         Command::Merge(a) => commands::map::merge(&a),
+        Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
     };

@@ -466,3 +466,19 @@ fn simulate_writes_a_dataset_and_refuses_to_overwrite() {
     assert!(err.contains("not empty"), "{err}");
     assert_eq!(std::fs::read(out.join("manifest.json")).unwrap(), before);
 }
+
+#[test]
+fn mutual_localisation_from_numbers() {
+    // B 4 m ahead of A and facing it; beacons 0.07 m ahead of each scanner.
+    let v = json(&olmap(&[
+        "mutual", "--a", "3.93", "--alpha", "0", "--b", "3.93", "--beta", "-0", "--json",
+    ]));
+    assert!((v["x_m"].as_f64().unwrap() - 4.0).abs() < 1e-9);
+    assert!((v["heading_deg"].as_f64().unwrap().abs() - 180.0).abs() < 1e-9);
+    // A distractor (separations 0.5 m apart) is refused with the reason.
+    let out = olmap(&[
+        "mutual", "--a", "3.43", "--alpha", "0", "--b", "3.93", "--beta", "0",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("distractor"));
+}

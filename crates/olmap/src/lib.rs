@@ -45,6 +45,7 @@ pub mod mapping;
 pub mod occupancy;
 pub mod scanner;
 pub mod sim;
+pub mod team;
 pub mod test_data;
 
 pub use error::{Error, ParseError, Result};

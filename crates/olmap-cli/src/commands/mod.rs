@@ -6,6 +6,7 @@ pub mod demo;
 pub mod info;
 pub mod map;
 pub mod mapping;
+pub mod mutual;
 pub mod poses;
 pub mod simulate;
 pub mod voxelize;

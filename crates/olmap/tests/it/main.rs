@@ -5,6 +5,7 @@ mod align_synthetic;
 mod bad_input;
 mod fuzz;
 mod mapping;
+mod mutual;
 mod occupancy;
 mod real_data;
 mod round_trip;

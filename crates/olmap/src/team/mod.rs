@@ -1,0 +1,9 @@
+//! Teams of robots: mutual localisation from two-way beacon sightings (thesis §3.3.1,
+//! §6.3.3), with the distractor test and the error model of §3.5.
+
+mod mutual;
+
+pub use mutual::{
+    expected_position_error, mutual_pose, separations, MutualFix, MutualObservation, MutualParams,
+    MutualReject,
+};
