@@ -14,13 +14,14 @@
 //! use olmap::geometry::Pose;
 //! use olmap::grid2d::{OccupancyGrid2d, SensorModel2d, Trinary};
 //!
-//! // Three beams from a sensor at (1, 1) looking along +x; the middle one hits at 2 m.
+//! // Three beams from a sensor at (1, 1) looking along +x: no return, a return at
+//! // 2.04 m, and one too short to use.
 //! let scan = LaserScan {
 //!     angle_min: -0.1,
 //!     angle_increment: 0.1,
 //!     range_min: 0.05,
 //!     range_max: 8.0,
-//!     ranges: vec![f32::INFINITY, 2.0, 0.01],
+//!     ranges: vec![f32::INFINITY, 2.04, 0.01],
 //!     intensities: None,
 //!     time: 0.0,
 //! };
@@ -28,11 +29,11 @@
 //! let model = SensorModel2d::default();
 //! let pose = Pose::from_xyz_ypr(1.0, 1.0, 0.0, 0.0, 0.0, 0.0);
 //! grid.insert_scan(&scan, &pose, &model).unwrap();
-//! assert!(grid.occupancy(3.02, 1.0) > 0.6); // the return
+//! assert!(grid.occupancy(3.04, 1.0) > 0.6); // the return
 //! assert!(grid.occupancy(2.0, 1.0) < 0.4); // the free space before it
 //! assert_eq!(grid.occupancy(-5.0, 1.0), 0.5); // never seen
 //! let map = grid.to_trinary(Default::default());
-//! assert_eq!(map.at_world(3.02, 1.0), Some(Trinary::Occupied));
+//! assert_eq!(map.at_world(3.04, 1.0), Some(Trinary::Occupied));
 //! ```
 
 pub mod buckets;

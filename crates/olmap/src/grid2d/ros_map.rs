@@ -385,12 +385,10 @@ fn parse_header(text: &str) -> Result<Header, ParseError> {
                     h.occupied = Some(p);
                 }
             }
-            "mode" => {
-                if v != "trinary" {
-                    return Err(ParseError::Unsupported(format!(
-                        "line {line}: mode '{v}' (only 'trinary' maps are read)"
-                    )));
-                }
+            "mode" if v != "trinary" => {
+                return Err(ParseError::Unsupported(format!(
+                    "line {line}: mode '{v}' (only 'trinary' maps are read)"
+                )));
             }
             _ => {}
         }
@@ -471,15 +469,16 @@ fn parse_pgm(data: &[u8]) -> Result<Pgm<'_>, ParseError> {
     if data.is_empty() {
         return Err(ParseError::Empty);
     }
-    if data.len() < 2 || &data[..2] != b"P5" {
-        let what = if data.starts_with(b"P2") {
-            return Err(ParseError::Unsupported(
-                "ASCII PGM (P2); only binary P5 images are read".into(),
-            ));
-        } else {
-            "expected the PGM magic number 'P5'"
-        };
-        return Err(ParseError::at(Location::Byte(0), what));
+    if data.starts_with(b"P2") {
+        return Err(ParseError::Unsupported(
+            "ASCII PGM (P2); only binary P5 images are read".into(),
+        ));
+    }
+    if !data.starts_with(b"P5") {
+        return Err(ParseError::at(
+            Location::Byte(0),
+            "expected the PGM magic number 'P5'",
+        ));
     }
     let mut pos = 2usize;
     let mut fields = [0u64; 3];
