@@ -44,6 +44,15 @@ pub struct Grid2dArgs {
     /// this range, metres.
     #[arg(long, default_value_t = 8.0)]
     pub max_range: f64,
+    /// Occupancy one return gives a cell of prior 0.5 (the sensor model's hit likelihood,
+    /// thesis (3.16)); above 0.65 one return makes a cell occupied in the image.
+    #[arg(long, default_value_t = 0.7, value_name = "P")]
+    pub hit: f64,
+    /// Occupancy one beam passing through gives a cell of prior 0.5; with the default 0.3 a
+    /// cell needs two passes (from two scans) to be free in the image (below 0.196), with a
+    /// value below 0.196 one pass is enough.
+    #[arg(long, default_value_t = 0.3, value_name = "P")]
+    pub pass: f64,
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
@@ -61,10 +70,14 @@ pub fn run(a: &Grid2dArgs) -> anyhow::Result<ExitCode> {
     let list = PoseList::read_path(&a.poses)?;
     let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned());
     let name = |p: &Path| p.file_name().map(|s| s.to_string_lossy().into_owned());
-    let model = SensorModel2d {
-        max_range: a.max_range,
-        ..SensorModel2d::default()
-    };
+    let d = SensorModel2d::default();
+    let model = SensorModel2d::from_probabilities(
+        a.hit,
+        a.pass,
+        SensorModel2d::probability(d.l_min),
+        SensorModel2d::probability(d.l_max),
+        a.max_range,
+    )?;
     let mut grid = OccupancyGrid2d::new(a.resolution)?;
     let mut buckets = PositionBuckets::new(a.bucket_radius)?;
     let (mut integrated, mut skipped) = (0usize, 0usize);

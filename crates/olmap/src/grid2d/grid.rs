@@ -353,7 +353,7 @@ impl OccupancyGrid2d {
 
     /// Integrates one scan taken by a sensor at `t_world_sensor` (thesis §3.3.3, (3.28)).
     ///
-    /// Each beam is traced with [`bresenham`](super::bresenham) from the sensor's cell to
+    /// Each beam is traced with [`bresenham`] from the sensor's cell to
     /// the cell of its end point:
     /// * a return at range `r` with `range_min <= r <= min(max_range, scan.range_max)`:
     ///   the cells before the end are observed free, the end cell occupied;
