@@ -56,6 +56,9 @@ enum Command {
     /// Generate a multi-robot dataset in a simulated world: scans, odometry, ground truth,
     /// sightings between robots (and optionally 2D scans and raw mirror-scanner logs).
     Simulate(commands::simulate::SimulateArgs),
+    /// Build a 2D occupancy grid from planar laser scans (CSV) and their poses; writes a ROS
+    /// map (PGM + YAML).
+    Grid2d(commands::grid2d::Grid2dArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
 }
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
+        Command::Grid2d(a) => commands::grid2d::run(&a),
     };
     match result {
         Ok(code) => code,

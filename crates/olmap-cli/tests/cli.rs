@@ -482,3 +482,78 @@ fn mutual_localisation_from_numbers() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("distractor"));
 }
+
+#[test]
+fn grid2d_builds_a_ros_map_from_2d_scans() {
+    use olmap::geometry::{Pose, PoseList};
+    use olmap::grid2d::Trinary;
+    let dir = tempfile::tempdir().unwrap();
+    let world = olmap::sim::box_room(nalgebra::Vector3::new(8.0, 6.0, 3.0));
+    let mut scanner = olmap::sim::PlanarScanner::sick_180_half_degree();
+    scanner.noise.sigma = 0.01;
+    // Four stops; the last turns on the spot at the first one (skipped by the buckets).
+    let stops = [
+        (2.0, 3.0, 0.0),
+        (6.0, 3.0, 3.1),
+        (4.0, 1.5, 1.6),
+        (2.1, 3.0, 2.0),
+    ];
+    let mut list = PoseList::default();
+    let mut files = Vec::new();
+    for (k, &(x, y, yaw)) in stops.iter().enumerate() {
+        let pose = Pose::from_xyz_ypr(x, y, 0.3, yaw, 0.0, 0.0);
+        let name = format!("scan{k:03}");
+        let path = dir.path().join(format!("{name}.csv"));
+        scanner
+            .scan(&world, &[], &pose, 1, k as u64)
+            .write_csv_path(&path)
+            .unwrap();
+        list.push(name, pose);
+        files.push(path.to_str().unwrap().to_string());
+    }
+    let poses = dir.path().join("poses.txt");
+    list.write_path(&poses).unwrap();
+    let pgm = dir.path().join("room.pgm");
+    let mut args = vec!["grid2d", "--json", "--bucket-radius", "0.5"];
+    args.extend(files.iter().map(String::as_str));
+    args.extend([
+        "--poses",
+        poses.to_str().unwrap(),
+        "-o",
+        pgm.to_str().unwrap(),
+    ]);
+    let v = json(&olmap(&args));
+    assert_eq!(v["scans"], 4);
+    assert_eq!(v["scans_integrated"], 3);
+    assert_eq!(v["scans_skipped_by_buckets"], 1);
+    let yaml = dir.path().join("room.yaml");
+    assert_eq!(v["yaml"], yaml.to_str().unwrap());
+    let map = olmap::grid2d::read_ros_map(&yaml).unwrap();
+    assert_eq!(map.resolution, 0.05);
+    assert_eq!(v["width"], map.width);
+    assert!((v["origin"][0].as_f64().unwrap() - map.origin[0]).abs() < 1e-9);
+    let c = map.counts();
+    assert_eq!(v["cells"]["free"], c.free);
+    assert_eq!(v["cells"]["occupied"], c.occupied);
+    assert_eq!(v["cells"]["unknown"], c.unknown);
+    // The room's middle is free, its walls occupied, beyond them unknown.
+    assert_eq!(map.at_world(4.0, 3.0), Some(Trinary::Free));
+    // (The wall face x = 8 lies on a cell boundary: its returns fall on either side.)
+    assert!([7.97, 8.02]
+        .iter()
+        .any(|&x| map.at_world(x, 3.0) == Some(Trinary::Occupied)));
+    assert_eq!(map.at_world(4.0, -0.5), Some(Trinary::Unknown));
+    // A scan without a pose is an error naming it.
+    let stray = dir.path().join("stray.csv");
+    std::fs::copy(&files[0], &stray).unwrap();
+    let out = olmap(&[
+        "grid2d",
+        stray.to_str().unwrap(),
+        "--poses",
+        poses.to_str().unwrap(),
+        "-o",
+        pgm.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("stray"));
+}

@@ -40,6 +40,7 @@ pub mod cloud;
 pub mod error;
 pub mod fixtures;
 pub mod geometry;
+pub mod grid2d;
 pub mod io;
 pub mod mapping;
 pub mod occupancy;

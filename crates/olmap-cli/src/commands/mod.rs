@@ -3,6 +3,7 @@
 pub mod align;
 pub mod convert;
 pub mod demo;
+pub mod grid2d;
 pub mod info;
 pub mod map;
 pub mod mapping;

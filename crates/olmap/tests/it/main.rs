@@ -4,6 +4,7 @@ mod align;
 mod align_synthetic;
 mod bad_input;
 mod fuzz;
+mod grid2d;
 mod mapping;
 mod mutual;
 mod occupancy;
