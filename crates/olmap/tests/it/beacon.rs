@@ -246,9 +246,15 @@ fn lsq_beats_rwht_on_simulated_rooms() {
         refine_iterations: 0,
         ..lsq
     };
+    let lsq_loose = LsqParams {
+        max_rms: 0.0125,
+        ..lsq
+    };
     let rwht = RwhtParams::default();
-    let (mut t_lsq, mut t_polar, mut t_rwht) =
-        (Tally::default(), Tally::default(), Tally::default());
+    let mut t_lsq = Tally::default();
+    let mut t_polar = Tally::default();
+    let mut t_loose = Tally::default();
+    let mut t_rwht = Tally::default();
     for seed in 0..200u64 {
         let scene = Scene::random(1000 + seed, [Material::FURNITURE; 2]);
         let scan = scene.scan(&scanner, seed);
@@ -257,11 +263,14 @@ fn lsq_beats_rwht_on_simulated_rooms() {
         t_lsq.add(&found, &scene.truth, &visible, s);
         let (found, s) = timed(|| detect_circles_lsq(&scan, RADIUS, &lsq_polar));
         t_polar.add(&found, &scene.truth, &visible, s);
+        let (found, s) = timed(|| detect_circles_lsq(&scan, RADIUS, &lsq_loose));
+        t_loose.add(&found, &scene.truth, &visible, s);
         let (found, s) = timed(|| detect_circles_rwht(&scan, RADIUS, &rwht));
         t_rwht.add(&found, &scene.truth, &visible, s);
     }
     t_lsq.report("LSQ");
     t_polar.report("LSQ polar fit only");
+    t_loose.report("LSQ max_rms 1.25 cm");
     t_rwht.report("RWHT");
     assert!(t_lsq.visible >= 250, "too few visible cylinders: {t_lsq:?}");
     assert!(t_lsq.rate() > t_rwht.rate(), "{t_lsq:?} {t_rwht:?}");
@@ -269,7 +278,291 @@ fn lsq_beats_rwht_on_simulated_rooms() {
         t_lsq.mean_error() < t_rwht.mean_error(),
         "{t_lsq:?} {t_rwht:?}"
     );
-    assert!(t_lsq.rate() >= 0.9, "{t_lsq:?}");
+    assert!(t_lsq.rate() >= 0.85, "{t_lsq:?}");
+    assert!(t_loose.rate() >= 0.95, "{t_loose:?}");
     assert!(t_lsq.mean_error() < 0.01, "{t_lsq:?}");
     assert!(t_lsq.fp_per_scan() < 0.2, "{t_lsq:?}");
+}
+
+/// Thesis §2.4.3: with retroreflective tape the bright runs give the beacon; plain
+/// cylinders are ignored, whatever their shape.
+#[test]
+fn reflective_mode_finds_taped_cylinders_only() {
+    let scanner = scanner(0.01);
+    let params = ReflectiveParams {
+        max_rms: 0.0125,
+        ..ReflectiveParams::default()
+    };
+    let (mut visible, mut found, mut plain_found, mut wrong, mut err) = (0, 0, 0, 0, 0.0);
+    for seed in 0..100u64 {
+        let scene = Scene::random(5000 + seed, [Material::BEACON, Material::FURNITURE]);
+        let scan = scene.scan(&scanner, seed);
+        let dets = detect_circles_reflective(&scan, RADIUS, &params);
+        let near = |k: usize| {
+            dets.iter()
+                .find(|d| (d.center - scene.truth[k]).norm() <= MATCH)
+        };
+        if scene.fully_visible(0, &scan) {
+            visible += 1;
+            if let Some(d) = near(0) {
+                found += 1;
+                err += (d.center - scene.truth[0]).norm();
+            }
+        }
+        if near(1).is_some() {
+            plain_found += 1;
+        }
+        wrong += dets
+            .iter()
+            .filter(|d| scene.truth.iter().all(|t| (d.center - t).norm() > MATCH))
+            .count();
+    }
+    let rate = found as f64 / visible as f64;
+    eprintln!(
+        "reflective: found {found} of {visible} visible taped cylinders ({:.1} %), mean centre \
+         error {:.2} mm, {plain_found} plain cylinders and {wrong} other things reported",
+        100.0 * rate,
+        1000.0 * err / found.max(1) as f64
+    );
+    assert!(visible >= 60, "{visible}");
+    assert!(rate >= 0.9, "{rate}");
+    assert_eq!(plain_found, 0);
+    assert_eq!(wrong, 0);
+    assert!(err / (found as f64) < 0.01);
+}
+
+/// A random planar motion and landmarks 1-6 m ahead of the robot.
+fn landmarks(rng: &mut SimRng, n: usize) -> (Vec<Point2<f64>>, Pose2) {
+    let before: Vec<Point2<f64>> = (0..n)
+        .map(|_| {
+            let (r, b) = (rng.range(1.0, 6.0), rng.range(-1.4, 1.4));
+            Point2::new(r * b.cos(), r * b.sin())
+        })
+        .collect();
+    let motion = Pose2::new(
+        rng.range(-0.5, 0.5),
+        rng.range(-0.5, 0.5),
+        rng.range(-0.6, 0.6),
+    );
+    (before, motion)
+}
+
+#[test]
+fn landmark_pose_change_is_exact_without_noise() {
+    let mut rng = SimRng::new(42);
+    for trial in 0..200 {
+        let n = 2 + trial % 4;
+        let (before, motion) = landmarks(&mut rng, n);
+        let inv = motion.inverse();
+        let after: Vec<Point2<f64>> = before.iter().map(|p| inv.transform_point(p)).collect();
+        let got = pose_change_from_landmarks(&before, &after).unwrap();
+        assert!((got.pose.x - motion.x).abs() < 1e-9, "{got:?} {motion:?}");
+        assert!((got.pose.y - motion.y).abs() < 1e-9, "{got:?} {motion:?}");
+        assert!(
+            (got.pose.theta - motion.theta).abs() < 1e-9,
+            "{got:?} {motion:?}"
+        );
+        assert!(got.rms < 1e-9);
+        assert_eq!(got.landmarks, n);
+        // Composition and the 3D pose agree.
+        let back = got.pose * got.pose.inverse();
+        assert!(back.distance() < 1e-12 && back.theta.abs() < 1e-12);
+        let p3 = got.pose.to_pose();
+        let q = p3.transform_point(&Point3::new(after[0].x, after[0].y, 0.0));
+        assert!((q.xy().coords - before[0].coords).norm() < 1e-9);
+    }
+}
+
+#[test]
+fn landmark_pose_change_errors() {
+    let p = |x, y| Point2::new(x, y);
+    assert!(pose_change_from_landmarks(&[p(1.0, 0.0)], &[p(1.0, 0.0)]).is_err());
+    assert!(pose_change_from_landmarks(&[], &[]).is_err());
+    assert!(pose_change_from_landmarks(&[p(1.0, 0.0), p(2.0, 0.0)], &[p(1.0, 0.0)]).is_err());
+    let coincident = [p(2.0, 1.0), p(2.0, 1.0)];
+    let fine = [p(2.0, 1.0), p(3.0, 1.0)];
+    assert!(pose_change_from_landmarks(&coincident, &fine).is_err());
+    assert!(pose_change_from_landmarks(&fine, &coincident).is_err());
+    assert!(pose_change_from_landmarks(&fine, &[p(f64::NAN, 0.0), p(1.0, 1.0)]).is_err());
+}
+
+/// Thesis (2.24)-(2.25): two landmarks 2 m apart about 4 m away, 1 cm range noise and
+/// 2 mrad bearing noise in both observations. The pose change compares two noisy
+/// observations, so its error is about sqrt(2) times one observation's.
+#[test]
+fn landmark_pose_change_error_matches_the_thesis_estimate() {
+    let (sigma_r, sigma_b) = (0.01, 0.002);
+    let a = Point2::new(4.0, 1.0);
+    let b = Point2::new(4.0, -1.0);
+    let predicted = std::f64::consts::SQRT_2 * localisation_error(4.0, 2.0, sigma_r, sigma_b);
+    let mut rng = SimRng::new(7);
+    let noisy = |p: &Point2<f64>, rng: &mut SimRng| {
+        let r = p.coords.norm() + rng.gauss(sigma_r);
+        let t = p.y.atan2(p.x) + rng.gauss(sigma_b);
+        Point2::new(r * t.cos(), r * t.sin())
+    };
+    let trials = 2000;
+    let mut sq = 0.0;
+    for _ in 0..trials {
+        let motion = Pose2::new(
+            rng.range(-0.3, 0.3),
+            rng.range(-0.3, 0.3),
+            rng.range(-0.2, 0.2),
+        );
+        let inv = motion.inverse();
+        let before = [noisy(&a, &mut rng), noisy(&b, &mut rng)];
+        let after = [
+            noisy(&inv.transform_point(&a), &mut rng),
+            noisy(&inv.transform_point(&b), &mut rng),
+        ];
+        let got = pose_change_from_landmarks(&before, &after).unwrap();
+        sq += (got.pose.x - motion.x).powi(2) + (got.pose.y - motion.y).powi(2);
+    }
+    let rms = (sq / trials as f64).sqrt();
+    eprintln!(
+        "landmark localisation: RMS position error {:.2} mm, thesis estimate (2.24)-(2.25) x sqrt 2 = {:.2} mm",
+        1000.0 * rms,
+        1000.0 * predicted
+    );
+    assert!(rms < 1.5 * predicted, "{rms} vs {predicted}");
+    assert!(rms > 0.5 * predicted, "{rms} vs {predicted}");
+}
+
+#[test]
+fn speed_limits_resolve_the_two_landmark_ambiguity() {
+    let before = [Point2::new(4.0, 1.0), Point2::new(4.0, -1.0)];
+    let motion = Pose2::new(0.1, 0.03, 0.1);
+    let inv = motion.inverse();
+    // Seen again in the other order.
+    let after: Vec<Point2<f64>> = before
+        .iter()
+        .rev()
+        .map(|p| inv.transform_point(p))
+        .collect();
+    // (2.18)-(2.19) at 4 m, 10 Hz, over half a second.
+    let limits = MotionLimits::for_beacons(RADIUS, 4.0, 10.0, 0.01, 0.5);
+    let m = match_landmarks(&before, &after, &limits, 0.02).unwrap();
+    assert_eq!(m.pairs, vec![(1, 0), (0, 1)]);
+    assert_eq!(m.alternatives, 0);
+    assert!((m.pose.pose.theta - 0.1).abs() < 1e-9);
+    assert!((m.pose.pose.x - 0.1).abs() < 1e-9 && (m.pose.pose.y - 0.03).abs() < 1e-9);
+    // Without speed limits both assignments fit equally well: ambiguous (the swapped one
+    // turns the robot about 180° about the midpoint).
+    let loose = MotionLimits::new(100.0, 100.0, 1.0);
+    let m = match_landmarks(&before, &after, &loose, 0.02).unwrap();
+    assert_eq!(m.alternatives, 1);
+    // Too fast a turn for the limits: no consistent assignment.
+    let spun: Vec<Point2<f64>> = before
+        .iter()
+        .map(|p| Pose2::new(0.0, 0.0, 1.5).inverse().transform_point(p))
+        .collect();
+    assert!(match_landmarks(&before, &spun, &limits, 0.02).is_err());
+}
+
+#[test]
+fn separations_identify_three_indistinguishable_landmarks() {
+    let mut rng = SimRng::new(3);
+    let loose = MotionLimits::new(100.0, 100.0, 1.0);
+    for _ in 0..50 {
+        let (before, motion) = landmarks(&mut rng, 3);
+        let inv = motion.inverse();
+        let mut after: Vec<(usize, Point2<f64>)> = before
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (k, inv.transform_point(p)))
+            .collect();
+        after.rotate_left(1 + rng.index(2));
+        let pts: Vec<Point2<f64>> = after.iter().map(|a| a.1).collect();
+        // Random landmarks are asymmetric enough unless two separations nearly agree.
+        let d = |i: usize, j: usize| (before[i] - before[j]).norm();
+        let seps = [d(0, 1), d(1, 2), d(0, 2)];
+        let min_gap = (0..3)
+            .flat_map(|i| (0..3).map(move |j| (i, j)))
+            .filter(|(i, j)| i < j)
+            .map(|(i, j)| (seps[i] - seps[j]).abs())
+            .fold(f64::INFINITY, f64::min);
+        if min_gap < 0.1 {
+            continue;
+        }
+        let m = match_landmarks(&before, &pts, &loose, 0.01).unwrap();
+        let expected: Vec<(usize, usize)> =
+            after.iter().enumerate().map(|(j, a)| (a.0, j)).collect();
+        assert_eq!(m.pairs, expected);
+        assert_eq!(m.alternatives, 0);
+        assert!((m.pose.pose.theta - motion.theta).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn laser_scan_json_and_csv_round_trip() {
+    let scene = Scene::random(77, [Material::BEACON, Material::FURNITURE]);
+    let mut scan = scene.scan(&scanner(0.01), 1);
+    scan.time = 12.25;
+    assert!(
+        scan.ranges.iter().any(|r| !r.is_finite()) || scan.ranges.iter().all(|r| r.is_finite())
+    );
+    scan.ranges[3] = f32::INFINITY;
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("scan.json");
+    let csv = dir.path().join("scan.csv");
+    scan.write_json_path(&json).unwrap();
+    scan.write_csv_path(&csv).unwrap();
+    assert_eq!(LaserScan::read_json_path(&json).unwrap(), scan);
+    assert_eq!(LaserScan::read_path(&json).unwrap(), scan);
+    assert_eq!(LaserScan::read_path(&csv).unwrap(), scan);
+    // Detections are the same from either file.
+    let a = detect_circles_lsq(
+        &LaserScan::read_path(&json).unwrap(),
+        RADIUS,
+        &LsqParams::default(),
+    );
+    let b = detect_circles_lsq(&scan, RADIUS, &LsqParams::default());
+    assert_eq!(a, b);
+    // Without intensities, and a ROS-like object with extra fields.
+    let bare = LaserScan {
+        intensities: None,
+        ..scan.clone()
+    };
+    let mut out = Vec::new();
+    bare.write_json(&mut out).unwrap();
+    assert_eq!(LaserScan::read_json(&out[..]).unwrap(), bare);
+    let ros = r#"{"header": {"frame_id": "laser"}, "angle_min": -1.0, "angle_max": 1.0,
+        "angle_increment": 1.0, "time_increment": 0.0, "scan_time": 0.1, "range_min": 0.1,
+        "range_max": 8.0, "ranges": [1.5, null, 2.5], "intensities": []}"#;
+    let got = LaserScan::read_json(ros.as_bytes()).unwrap();
+    assert_eq!(got.ranges[1], f32::INFINITY);
+    assert_eq!(got.intensities, None);
+    assert_eq!(got.time, 0.0);
+}
+
+#[test]
+fn bad_laser_scan_json_names_the_line() {
+    let bad = "{\n  \"angle_min\": 0.0,\n  \"angle_increment\": oops,\n}";
+    match LaserScan::read_json(bad.as_bytes()) {
+        Err(ParseError::Invalid {
+            at: Location::Line(3),
+            ..
+        }) => {}
+        other => panic!("{other:?}"),
+    }
+    let missing = "{\n  \"angle_min\": 0.0,\n  \"angle_increment\": 0.1\n}";
+    assert!(matches!(
+        LaserScan::read_json(missing.as_bytes()),
+        Err(ParseError::Invalid { .. })
+    ));
+    assert!(matches!(
+        LaserScan::read_json(&b"  "[..]),
+        Err(ParseError::Empty)
+    ));
+    let lengths = r#"{"angle_min": 0, "angle_increment": 0.1, "range_min": 0, "range_max": 8,
+        "ranges": [1.0, 2.0], "intensities": [1.0]}"#;
+    assert!(matches!(
+        LaserScan::read_json(lengths.as_bytes()),
+        Err(ParseError::Malformed(_))
+    ));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.json");
+    std::fs::write(&path, bad).unwrap();
+    let e = LaserScan::read_path(&path).unwrap_err().to_string();
+    assert!(e.contains("bad.json") && e.contains("line 3"), "{e}");
 }
