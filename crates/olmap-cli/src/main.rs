@@ -53,6 +53,9 @@ enum Command {
     /// Generate a multi-robot dataset in a simulated world: scans, odometry, ground truth,
     /// sightings between robots (and optionally 2D scans and raw mirror-scanner logs).
     Simulate(commands::simulate::SimulateArgs),
+    /// Find circular beacons of known radius in a 2D laser scan (CSV or JSON): least
+    /// squares, range-weighted Hough transform or retroreflective runs.
+    Beacons(commands::beacons::BeaconsArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
 }
@@ -71,6 +74,7 @@ fn main() -> ExitCode {
         Command::Merge(a) => commands::map::merge(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
+        Command::Beacons(a) => commands::beacons::run(&a),
     };
     match result {
         Ok(code) => code,

@@ -341,7 +341,7 @@ pub fn match_landmarks(
     } else {
         (after, before)
     };
-    let mut best: Option<(Correspondence, f64)> = None;
+    let mut best: Option<Correspondence> = None;
     let mut consistent = 0usize;
     let mut error: Option<Error> = None;
     let mut chosen = Vec::with_capacity(small.len());
@@ -373,7 +373,7 @@ pub fn match_landmarks(
             let key = (pose.rms, pose.pose.theta.abs());
             let better = match &best {
                 None => true,
-                Some((c, _)) => {
+                Some(c) => {
                     let old = (c.pose.rms, c.pose.pose.theta.abs());
                     key.0 < old.0 - 1e-12 || ((key.0 - old.0).abs() <= 1e-12 && key.1 < old.1)
                 }
@@ -381,19 +381,16 @@ pub fn match_landmarks(
             if better {
                 let mut pairs = pairs;
                 pairs.sort_by_key(|p| p.1);
-                best = Some((
-                    Correspondence {
-                        pairs,
-                        pose,
-                        alternatives: 0,
-                    },
-                    pose.rms,
-                ));
+                best = Some(Correspondence {
+                    pairs,
+                    pose,
+                    alternatives: 0,
+                });
             }
         },
     );
     match best {
-        Some((mut c, _)) => {
+        Some(mut c) => {
             c.alternatives = consistent - 1;
             Ok(c)
         }
