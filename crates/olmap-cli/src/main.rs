@@ -59,6 +59,9 @@ enum Command {
     /// Build a 2D occupancy grid from planar laser scans (CSV) and their poses; writes a ROS
     /// map (PGM + YAML).
     Grid2d(commands::grid2d::Grid2dArgs),
+    /// Find circular beacons of known radius in a 2D laser scan (CSV or JSON): least
+    /// squares, range-weighted Hough transform or retroreflective runs.
+    Beacons(commands::beacons::BeaconsArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
 }
@@ -79,6 +82,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Grid2d(a) => commands::grid2d::run(&a),
+        Command::Beacons(a) => commands::beacons::run(&a),
     };
     match result {
         Ok(code) => code,

@@ -557,3 +557,53 @@ fn grid2d_builds_a_ros_map_from_2d_scans() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("stray"));
 }
+
+#[test]
+fn beacons_finds_a_simulated_cylinder() {
+    use nalgebra::{Point3, Vector3};
+    use olmap::sim::{box_room, Material, Object, PlanarScanner, Shape};
+    let room = box_room(Vector3::new(8.0, 6.0, 3.0));
+    let cylinder = Object {
+        shape: Shape::Cylinder {
+            base: Point3::new(4.0, 3.5, 0.0),
+            radius: 0.125,
+            height: 1.0,
+        },
+        material: Material::BEACON,
+        id: 1,
+    };
+    let mut scanner = PlanarScanner::sick_180_half_degree();
+    scanner.noise.sigma = 0.005;
+    let sensor = olmap::geometry::Pose::from_xyz_ypr(1.0, 3.0, 0.4, 0.0, 0.0, 0.0);
+    let scan = scanner.scan(&room, &[cylinder], &sensor, 1, 0);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("scan.csv");
+    scan.write_csv_path(&csv).unwrap();
+    // The cylinder is 3 m ahead and 0.5 m to the left of the sensor.
+    for method in ["lsq", "reflective", "rwht"] {
+        let v = json(&olmap(&[
+            "beacons",
+            csv.to_str().unwrap(),
+            "--radius",
+            "0.125",
+            "--method",
+            method,
+            "--json",
+        ]));
+        assert_eq!(v["method"], method);
+        let d = v["detections"].as_array().unwrap();
+        let hit = d.iter().find(|d| {
+            (d["x"].as_f64().unwrap() - 3.0).abs() < 0.03
+                && (d["y"].as_f64().unwrap() - 0.5).abs() < 0.03
+        });
+        assert!(hit.is_some(), "{method}: {v}");
+        if method != "rwht" {
+            assert_eq!(d.len(), 1, "{method}: {v}");
+        }
+    }
+    let text = olmap(&["beacons", csv.to_str().unwrap()]);
+    assert!(text.status.success());
+    assert!(String::from_utf8_lossy(&text.stdout).contains("1 circle(s)"));
+    let bad = olmap(&["beacons", csv.to_str().unwrap(), "--radius", "-1"]);
+    assert!(!bad.status.success());
+}

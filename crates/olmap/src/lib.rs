@@ -36,6 +36,7 @@
 #![warn(missing_docs)]
 
 pub mod align;
+pub mod beacon;
 pub mod cloud;
 pub mod error;
 pub mod fixtures;

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod align;
+pub mod beacons;
 pub mod convert;
 pub mod demo;
 pub mod grid2d;

@@ -16,6 +16,28 @@
 //! `inf` marking a beam with no return. Blank lines and further `#` lines are skipped.
 //! Numbers are written in Rust's shortest round-trip form, so reading a written scan gives
 //! it back bit for bit. Reading a malformed file gives a [`ParseError`] naming the line.
+//!
+//! ## JSON layout
+//! ```text
+//! {
+//!   "angle_min": -1.5707963267948966,
+//!   "angle_increment": 0.008726646259971648,
+//!   "range_min": 0.0,
+//!   "range_max": 8.0,
+//!   "ranges": [2.5, null, 3.25],
+//!   "intensities": [0.6, 0.0, 2.0],
+//!   "time": 12.5
+//! }
+//! ```
+//! One object with the field names of ROS `sensor_msgs/LaserScan`: radians, metres and
+//! seconds; `null` in `ranges` for a beam with no return (written for any non-finite
+//! range, read back as `f32::INFINITY`); `intensities` may be `null`, empty or absent
+//! (no intensities) and `time` absent (0). Other fields (a ROS `header`, `angle_max`,
+//! `scan_time`, ...) are ignored when reading. Numbers are written in their shortest
+//! round-trip form, so a written scan reads back bit for bit (apart from non-finite
+//! ranges, which all become infinity). Malformed JSON, and JSON that does not describe a
+//! scan (a missing field, a string for a number), give a [`ParseError`] naming the line;
+//! intensities of another length than the ranges give [`ParseError::Malformed`].
 
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -29,6 +51,33 @@ use crate::io::text::for_each_line;
 const MAGIC: &str = "# olmap laser scan v1";
 const PARAMS: &str = "angle_min,angle_increment,range_min,range_max,time";
 const FORMAT: &str = "olmap laser scan CSV";
+const FORMAT_JSON: &str = "olmap laser scan JSON";
+
+/// The JSON layout, as written.
+#[derive(serde::Serialize)]
+struct JsonOut<'a> {
+    angle_min: f64,
+    angle_increment: f64,
+    range_min: f64,
+    range_max: Option<f64>,
+    ranges: Vec<Option<f32>>,
+    intensities: Option<&'a [f32]>,
+    time: f64,
+}
+
+/// The JSON layout, as read (unknown fields ignored).
+#[derive(serde::Deserialize)]
+struct JsonIn {
+    angle_min: f64,
+    angle_increment: f64,
+    range_min: f64,
+    range_max: Option<f64>,
+    ranges: Vec<Option<f32>>,
+    #[serde(default)]
+    intensities: Option<Vec<f32>>,
+    #[serde(default)]
+    time: f64,
+}
 
 /// One sweep of a 2D laser scanner in its own plane (the sensor's xy plane; beam `i` points
 /// at angle `angle_min + i angle_increment` from x toward y).
@@ -249,6 +298,125 @@ impl LaserScan {
             ranges,
             intensities: with_int.then_some(ints),
         })
+    }
+
+    /// Writes the scan as JSON (see the module documentation).
+    ///
+    /// ```
+    /// use olmap::cloud::LaserScan;
+    /// let scan = LaserScan {
+    ///     angle_min: -0.5,
+    ///     angle_increment: 0.25,
+    ///     range_min: 0.1,
+    ///     range_max: 8.0,
+    ///     ranges: vec![2.0, f32::INFINITY, 3.0],
+    ///     intensities: None,
+    ///     time: 1.5,
+    /// };
+    /// let mut json = Vec::new();
+    /// scan.write_json(&mut json).unwrap();
+    /// assert!(String::from_utf8_lossy(&json).contains("null"));
+    /// assert_eq!(LaserScan::read_json(&json[..]).unwrap(), scan);
+    /// ```
+    pub fn write_json<W: Write>(&self, mut w: W) -> std::io::Result<()> {
+        if let Some(ints) = &self.intensities {
+            if ints.len() != self.ranges.len() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!(
+                        "laser scan has {} ranges but {} intensities",
+                        self.ranges.len(),
+                        ints.len()
+                    ),
+                ));
+            }
+        }
+        let out = JsonOut {
+            angle_min: self.angle_min,
+            angle_increment: self.angle_increment,
+            range_min: self.range_min,
+            range_max: self.range_max.is_finite().then_some(self.range_max),
+            ranges: self
+                .ranges
+                .iter()
+                .map(|r| r.is_finite().then_some(*r))
+                .collect(),
+            intensities: self.intensities.as_deref(),
+            time: self.time,
+        };
+        serde_json::to_writer_pretty(&mut w, &out).map_err(std::io::Error::other)?;
+        writeln!(w)
+    }
+
+    /// Reads a scan from JSON (see the module documentation); a `null` `range_max` reads
+    /// as infinity.
+    pub fn read_json<R: std::io::Read>(mut reader: R) -> Result<Self, ParseError> {
+        let mut text = String::new();
+        reader.read_to_string(&mut text)?;
+        if text.trim().is_empty() {
+            return Err(ParseError::Empty);
+        }
+        let parsed: JsonIn = serde_json::from_str(&text).map_err(|e| {
+            use serde_json::error::Category;
+            match e.classify() {
+                Category::Eof => ParseError::Truncated(format!("{e}")),
+                Category::Syntax => ParseError::line(
+                    e.line(),
+                    format!("invalid JSON at column {}: {e}", e.column()),
+                ),
+                _ => ParseError::line(e.line(), format!("not a laser scan: {e}")),
+            }
+        })?;
+        let intensities = parsed
+            .intensities
+            .filter(|v| !v.is_empty() || parsed.ranges.is_empty());
+        if let Some(ints) = &intensities {
+            if ints.len() != parsed.ranges.len() {
+                return Err(ParseError::Malformed(format!(
+                    "{} ranges but {} intensities",
+                    parsed.ranges.len(),
+                    ints.len()
+                )));
+            }
+        }
+        Ok(LaserScan {
+            angle_min: parsed.angle_min,
+            angle_increment: parsed.angle_increment,
+            range_min: parsed.range_min,
+            range_max: parsed.range_max.unwrap_or(f64::INFINITY),
+            ranges: parsed
+                .ranges
+                .into_iter()
+                .map(|r| r.unwrap_or(f32::INFINITY))
+                .collect(),
+            intensities,
+            time: parsed.time,
+        })
+    }
+
+    /// Writes the scan as JSON to a file atomically.
+    pub fn write_json_path(&self, path: impl AsRef<Path>) -> Result<()> {
+        crate::io::write_atomic(path.as_ref(), FORMAT_JSON, |w| self.write_json(w))
+    }
+
+    /// Reads a scan from a JSON file; errors name the file and, for malformed JSON, the
+    /// line.
+    pub fn read_json_path(path: impl AsRef<Path>) -> Result<Self> {
+        crate::io::parse_file(path.as_ref(), FORMAT_JSON, Self::read_json)
+    }
+
+    /// Reads a scan from a `.json` file as JSON, anything else as CSV.
+    pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let json = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+        if json {
+            Self::read_json_path(path)
+        } else {
+            Self::read_csv_path(path)
+        }
     }
 
     /// Writes the scan as CSV to a file atomically.

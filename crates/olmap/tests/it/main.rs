@@ -3,6 +3,7 @@
 mod align;
 mod align_synthetic;
 mod bad_input;
+mod beacon;
 mod fuzz;
 mod grid2d;
 mod mapping;

@@ -1,0 +1,239 @@
+//! The range-weighted Hough transform for circles of known radius (thesis §2.4.1), the
+//! baseline the least-squares detector is compared with.
+
+use nalgebra::Point2;
+
+use super::detection::{merge_duplicates, Detection};
+use super::fit::circle_residual;
+use crate::cloud::LaserScan;
+
+/// Most accumulator cells [`detect_circles_rwht`] allocates; a scan whose extent would
+/// need more gets coarser cells.
+const MAX_CELLS: usize = 1 << 24;
+
+/// Parameters of [`detect_circles_rwht`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RwhtParams {
+    /// Accumulator cell size, metres (default 0.02).
+    pub cell: f64,
+    /// A peak must collect at least this fraction of the best peak's votes (default 0.5).
+    pub min_fraction: f64,
+    /// A peak must collect at least this fraction of the votes of a fully visible circle,
+    /// about `2 R / angle_increment` whatever its range (thanks to the range weighting)
+    /// (default 0.25).
+    pub min_support: f64,
+    /// Most circles reported, strongest first (default 10).
+    pub max_peaks: usize,
+    /// Half-width, in cells, of the neighbourhood whose votes average into the refined
+    /// centre (default 2: 5 x 5 cells).
+    pub refine_cells: usize,
+    /// Returns within `R + member_tolerance` of a refined centre are the circle's: they
+    /// give its `returns` and `rms`, metres (default 0.05).
+    pub member_tolerance: f64,
+}
+
+impl Default for RwhtParams {
+    fn default() -> Self {
+        RwhtParams {
+            cell: 0.02,
+            min_fraction: 0.5,
+            min_support: 0.25,
+            max_peaks: 10,
+            refine_cells: 2,
+            member_tolerance: 0.05,
+        }
+    }
+}
+
+/// Finds circles of known `radius` by the range-weighted Hough transform (§2.4.1, after
+/// Forsberg et al. 1995); returns them sorted by bearing.
+///
+/// * **Accumulator.** A 2D grid of candidate centres, `cell` metres square, over the
+///   bounding box of the scan's returns grown by `R` (cells grow if that would exceed
+///   2^24 cells).
+/// * **Votes.** Each return votes for every cell on the circle of radius `R` around it,
+///   but only on the half of that circle facing away from the sensor (a circle seen from
+///   the sensor lies behind its returns; the near half would be hidden by the circle
+///   itself). Each cell gets at most one vote per return, of weight equal to the return's
+///   range `r`: beams `dθ` apart hit a surface at range `r` about `r dθ` apart, so the
+///   weight undoes the `1/r` fall of point density and near walls no longer drown far
+///   circles.
+/// * **Peaks.** Cells that are maxima of their 3 x 3 neighbourhood with at least
+///   `min_fraction` of the best cell's votes and `min_support` of a full circle's votes;
+///   the strongest first, dropping any within `R` of a stronger one, at most `max_peaks`.
+/// * **Centre.** The vote-weighted mean of the cell centres within `refine_cells` of the
+///   peak.
+///
+/// `rms` and `returns` describe the returns within `R + member_tolerance` of the centre;
+/// the confidence is the peak's votes over a full circle's (`2 asin(R / c) c /
+/// angle_increment` at centre range `c`), at most 1. Like any Hough transform it always
+/// answers with the strongest peaks, circles or not.
+///
+/// ```
+/// use olmap::beacon::{detect_circles_rwht, RwhtParams};
+/// use olmap::cloud::LaserScan;
+/// let (radius, cx) = (0.125, 2.0);
+/// let step = 0.5f64.to_radians();
+/// let ranges = (0..81)
+///     .map(|i| {
+///         let a = -20f64.to_radians() + i as f64 * step;
+///         let disc = radius * radius - (cx * a.sin()).powi(2);
+///         if disc >= 0.0 { (cx * a.cos() - disc.sqrt()) as f32 } else { f32::INFINITY }
+///     })
+///     .collect();
+/// let scan = LaserScan {
+///     angle_min: -20f64.to_radians(),
+///     angle_increment: step,
+///     range_min: 0.0,
+///     range_max: 8.0,
+///     ranges,
+///     intensities: None,
+///     time: 0.0,
+/// };
+/// let found = detect_circles_rwht(&scan, radius, &RwhtParams::default());
+/// assert!((found[0].center.x - cx).abs() < 0.02);
+/// assert!(found[0].center.y.abs() < 0.02);
+/// ```
+pub fn detect_circles_rwht(scan: &LaserScan, radius: f64, params: &RwhtParams) -> Vec<Detection> {
+    let step = scan.angle_increment.abs();
+    if radius.is_nan()
+        || radius <= 0.0
+        || params.cell.is_nan()
+        || params.cell <= 0.0
+        || !step.is_finite()
+        || step <= 0.0
+    {
+        return Vec::new();
+    }
+    // The returns: point, range, bearing.
+    let returns: Vec<(Point2<f64>, f64, f64)> = (0..scan.len())
+        .filter(|&i| scan.is_valid(i))
+        .map(|i| {
+            let r = scan.ranges[i] as f64;
+            let a = scan.angle(i);
+            (Point2::new(r * a.cos(), r * a.sin()), r, a)
+        })
+        .collect();
+    if returns.is_empty() {
+        return Vec::new();
+    }
+    let grow = radius + 2.0 * params.cell;
+    let (mut min, mut max) = (returns[0].0, returns[0].0);
+    for (p, _, _) in &returns {
+        min = min.inf(p);
+        max = max.sup(p);
+    }
+    let min = min - nalgebra::Vector2::new(grow, grow);
+    let max = max + nalgebra::Vector2::new(grow, grow);
+    let mut cell = params.cell;
+    let dims = |cell: f64| {
+        (
+            ((max.x - min.x) / cell).ceil() as usize + 1,
+            ((max.y - min.y) / cell).ceil() as usize + 1,
+        )
+    };
+    let (mut nx, mut ny) = dims(cell);
+    while nx.saturating_mul(ny) > MAX_CELLS {
+        cell *= 2.0;
+        (nx, ny) = dims(cell);
+    }
+    let mut acc = vec![0.0f32; nx * ny];
+
+    // Votes along the far half-circle of each return.
+    let samples = ((std::f64::consts::PI * radius / (0.5 * cell)).ceil() as usize).max(2);
+    for &(p, r, a) in &returns {
+        let mut last = usize::MAX;
+        for k in 0..=samples {
+            let beta =
+                a - std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * k as f64 / samples as f64;
+            let cx = ((p.x + radius * beta.cos() - min.x) / cell) as usize;
+            let cy = ((p.y + radius * beta.sin() - min.y) / cell) as usize;
+            let idx = cy * nx + cx;
+            if idx != last {
+                acc[idx] += r as f32;
+                last = idx;
+            }
+        }
+    }
+
+    // 3 x 3 local maxima above the thresholds.
+    let best = acc.iter().copied().fold(0.0f32, f32::max) as f64;
+    let full = 2.0 * radius / step;
+    let threshold = (params.min_fraction * best).max(params.min_support * full);
+    if best <= 0.0 || best < threshold {
+        return Vec::new();
+    }
+    let mut peaks: Vec<(f32, usize, usize)> = Vec::new();
+    for y in 1..ny - 1 {
+        for x in 1..nx - 1 {
+            let v = acc[y * nx + x];
+            if (v as f64) < threshold {
+                continue;
+            }
+            let mut is_max = true;
+            'n: for dy in 0..3 {
+                for dx in 0..3 {
+                    let j = (y + dy - 1) * nx + (x + dx - 1);
+                    let earlier = j < y * nx + x;
+                    let w = acc[j];
+                    if (earlier && w >= v) || (!earlier && w > v) {
+                        is_max = false;
+                        break 'n;
+                    }
+                }
+            }
+            if is_max {
+                peaks.push((v, x, y));
+            }
+        }
+    }
+    peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
+
+    let mut found: Vec<Detection> = Vec::new();
+    let k = params.refine_cells as isize;
+    for (votes, x, y) in peaks {
+        if found.len() >= params.max_peaks {
+            break;
+        }
+        let (mut sw, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for dy in -k..=k {
+            for dx in -k..=k {
+                let (cx, cy) = (x as isize + dx, y as isize + dy);
+                if cx < 0 || cy < 0 || cx >= nx as isize || cy >= ny as isize {
+                    continue;
+                }
+                let w = acc[cy as usize * nx + cx as usize] as f64;
+                sw += w;
+                sx += w * (min.x + (cx as f64 + 0.5) * cell);
+                sy += w * (min.y + (cy as f64 + 0.5) * cell);
+            }
+        }
+        let center = Point2::new(sx / sw, sy / sw);
+        if found.iter().any(|d| (d.center - center).norm() < radius) {
+            continue;
+        }
+        let members: Vec<f64> = returns
+            .iter()
+            .map(|(p, _, _)| circle_residual(p, &center, radius))
+            .filter(|e| *e <= params.member_tolerance)
+            .collect();
+        let rms = if members.is_empty() {
+            f64::INFINITY
+        } else {
+            (members.iter().map(|e| e * e).sum::<f64>() / members.len() as f64).sqrt()
+        };
+        let c = center.coords.norm();
+        let expected = if c > radius {
+            2.0 * (radius / c).asin() * c / step
+        } else {
+            full
+        };
+        found.push(Detection {
+            center,
+            rms,
+            returns: members.len(),
+            confidence: (votes as f64 / expected).clamp(0.0, 1.0),
+        });
+    }
+    merge_duplicates(found, radius)
+}
