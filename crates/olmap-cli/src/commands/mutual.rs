@@ -3,24 +3,37 @@
 use std::process::ExitCode;
 
 use clap::Args;
-use olmap::team::{expected_position_error, mutual_pose, MutualObservation, MutualParams};
+use olmap::team::{
+    expected_position_error, mutual_from_scans, mutual_pose, MutualObservation, MutualParams,
+};
 use serde_json::json;
 
-/// Arguments of `olmap mutual`.
+/// Arguments of `olmap mutual`: either the four measurements, or the two robots' 2D scans
+/// (CSV or JSON) taken at the same time, in which the retroreflective beacons are found.
 #[derive(Args)]
 pub struct MutualArgs {
     /// Range from robot A's scanner to B's beacon, metres.
-    #[arg(long)]
-    pub a: f64,
+    #[arg(long, required_unless_present = "scans")]
+    pub a: Option<f64>,
     /// Bearing of B's beacon as A sees it, degrees (positive to the left).
-    #[arg(long, allow_hyphen_values = true)]
-    pub alpha: f64,
+    #[arg(long, allow_hyphen_values = true, required_unless_present = "scans")]
+    pub alpha: Option<f64>,
     /// Range from robot B's scanner to A's beacon, metres.
-    #[arg(long)]
-    pub b: f64,
+    #[arg(long, required_unless_present = "scans")]
+    pub b: Option<f64>,
     /// Bearing of A's beacon as B sees it, degrees.
-    #[arg(long, allow_hyphen_values = true)]
-    pub beta: f64,
+    #[arg(long, allow_hyphen_values = true, required_unless_present = "scans")]
+    pub beta: Option<f64>,
+    /// Robot A's and robot B's 2D scans (LaserScan CSV or JSON with intensities): find the
+    /// beacons in them instead of giving the measurements.
+    #[arg(long, num_args = 2, value_names = ["SCAN_A", "SCAN_B"], conflicts_with_all = ["a", "alpha", "b", "beta"])]
+    pub scans: Option<Vec<std::path::PathBuf>>,
+    /// Beacon radius for --scans, metres.
+    #[arg(long, default_value_t = 0.05)]
+    pub radius: f64,
+    /// Largest RMS of a beacon fit for --scans, metres (about twice the range noise).
+    #[arg(long, default_value_t = 0.02)]
+    pub max_rms: f64,
     /// Beacon offset ahead of each scanner, metres (0 for beacons above the scanners).
     #[arg(long, default_value_t = 0.07)]
     pub offset: f64,
@@ -41,17 +54,44 @@ pub struct MutualArgs {
 
 /// Runs `olmap mutual`.
 pub fn run(m: &MutualArgs) -> anyhow::Result<ExitCode> {
-    let o = MutualObservation {
-        a: m.a,
-        alpha: m.alpha.to_radians(),
-        b: m.b,
-        beta: m.beta.to_radians(),
-        d: m.offset,
-    };
     let params = MutualParams {
         max_separation_mismatch: m.max_mismatch,
     };
-    let fix = mutual_pose(&o, &params)?;
+    let (fix, o) = match &m.scans {
+        Some(paths) => {
+            let read = |p: &std::path::PathBuf| olmap::cloud::LaserScan::read_path(p);
+            let (sa, sb) = (read(&paths[0])?, read(&paths[1])?);
+            let detect = olmap::beacon::ReflectiveParams {
+                max_rms: m.max_rms,
+                ..Default::default()
+            };
+            let fix = mutual_from_scans(&sa, &sb, m.radius, m.offset, &detect, &params)?;
+            // The observation the fix came from, for the error bound: ranges from the
+            // separations' geometry are close enough (a ~ b ~ the distance).
+            let dist = (fix.x * fix.x + fix.y * fix.y).sqrt();
+            let o = MutualObservation {
+                a: dist,
+                alpha: 0.0,
+                b: dist,
+                beta: 0.0,
+                d: m.offset,
+            };
+            (fix, o)
+        }
+        None => {
+            let need = |v: Option<f64>, name: &str| {
+                v.ok_or_else(|| anyhow::anyhow!("--{name} is needed without --scans"))
+            };
+            let o = MutualObservation {
+                a: need(m.a, "a")?,
+                alpha: need(m.alpha, "alpha")?.to_radians(),
+                b: need(m.b, "b")?,
+                beta: need(m.beta, "beta")?.to_radians(),
+                d: m.offset,
+            };
+            (mutual_pose(&o, &params)?, o)
+        }
+    };
     let bound = expected_position_error(&o, m.range_error, m.beacon_width, 0.0)?;
     if m.json {
         let v = json!({

@@ -7,7 +7,7 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use olmap::io::sim_dataset::write_dataset;
 use olmap::sim::{
-    simulate, BeaconMount, MirrorScanner, OdometryNoise, PlanarScanner, Scanner3d, SimConfig,
+    simulate, MirrorScanner, OdometryNoise, PlanarScanner, RobotModel, Scanner3d, SimConfig,
     SpinningLidar, WorldKind,
 };
 use serde_json::json;
@@ -54,7 +54,8 @@ pub enum OdometryArg {
 pub enum BeaconArg {
     /// Above the 3D scanner (seen by 3D scanners, §6.3.3).
     Above,
-    /// 0.07 m in front of the 2D scanner (seen by 2D scanners, §3.3.1).
+    /// 0.1 m in front of the 2D scanner, on a body lower than the 2D scanner (seen by 2D
+    /// scanners, §3.3.1).
     Front,
 }
 
@@ -140,7 +141,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         ..Default::default()
     };
     if let BeaconArg::Front = a.beacon {
-        config.robot.beacon = BeaconMount::Front { offset: 0.07 };
+        config.robot = RobotModel::front_beacon(0.1);
         config.sighting.fov = 180f64.to_radians();
     }
     if a.scans2d {

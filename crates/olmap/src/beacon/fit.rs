@@ -169,3 +169,26 @@ pub fn refine_circle(
     }
     c
 }
+
+/// [`fit_circle_polar`], or, when the quadratic has no usable minimum (a short, noisy arc
+/// whose curvature the range noise hides: a 15 cm beacon's visible arc bulges only 2-3 cm,
+/// as much as 1-2 cm of noise), a flat start: the centre `radius` behind the nearest
+/// return at the samples' mean bearing, for [`refine_circle`] to finish. `None` with fewer
+/// than three samples.
+pub fn fit_circle_polar_or_flat(samples: &[(f64, f64)], radius: f64) -> Option<PolarFit> {
+    if let Some(fit) = fit_circle_polar(samples, radius) {
+        return Some(fit);
+    }
+    if samples.len() < 3 {
+        return None;
+    }
+    let n = samples.len() as f64;
+    let bearing = samples.iter().map(|s| s.0).sum::<f64>() / n;
+    let nearest = samples.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
+    (nearest.is_finite() && bearing.is_finite()).then_some(PolarFit {
+        range: nearest + radius,
+        bearing,
+        coefficients: [nearest, 0.0, 0.0],
+        reference: bearing,
+    })
+}

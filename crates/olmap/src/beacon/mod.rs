@@ -61,7 +61,9 @@ mod reflective;
 mod rwht;
 
 pub use detection::Detection;
-pub use fit::{circle_residual, fit_circle_polar, refine_circle, PolarFit};
+pub use fit::{
+    circle_residual, fit_circle_polar, fit_circle_polar_or_flat, refine_circle, PolarFit,
+};
 pub use landmark::{pose_change_from_landmarks, LandmarkPose, Pose2};
 pub use lsq::{detect_circles_lsq, LsqParams};
 pub use reflective::{detect_circles_reflective, ReflectiveParams};

@@ -4,7 +4,7 @@
 use nalgebra::Point2;
 
 use super::detection::{beams_within, merge_duplicates, Detection};
-use super::fit::{circle_residual, fit_circle_polar, refine_circle};
+use super::fit::{circle_residual, fit_circle_polar_or_flat, refine_circle};
 use crate::cloud::LaserScan;
 use crate::geometry::wrap_angle;
 
@@ -141,7 +141,7 @@ fn fit_run(
         .iter()
         .map(|&j| (scan.angle(j), scan.ranges[j] as f64))
         .collect();
-    let fit = fit_circle_polar(&samples, radius)?;
+    let fit = fit_circle_polar_or_flat(&samples, radius)?;
     let points: Vec<Point2<f64>> = samples
         .iter()
         .map(|&(a, r)| Point2::new(r * a.cos(), r * a.sin()))

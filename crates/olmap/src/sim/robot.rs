@@ -57,6 +57,19 @@ impl Default for RobotModel {
 }
 
 impl RobotModel {
+    /// A robot for 2D mutual localisation (thesis §3.3.1): a low body (0.25 m, below the 2D
+    /// scanner at 0.3 m, like a Pioneer with its laser on top) and a retroreflective
+    /// cylinder of radius 0.05 m `offset` metres ahead of the 2D scanner, at its height.
+    pub fn front_beacon(offset: f64) -> Self {
+        RobotModel {
+            body_height: 0.25,
+            scanner2d_height: 0.3,
+            beacon: BeaconMount::Front { offset },
+            beacon_radius: 0.05,
+            ..Default::default()
+        }
+    }
+
     /// The 3D scanner's pose in the robot frame, `T_robot_sensor`.
     pub fn sensor_pose(&self) -> Pose {
         Pose::from_xyz_ypr(0.0, 0.0, self.sensor_height, 0.0, 0.0, 0.0)

@@ -4,6 +4,6 @@
 mod mutual;
 
 pub use mutual::{
-    expected_position_error, mutual_pose, separations, MutualFix, MutualObservation, MutualParams,
-    MutualReject,
+    expected_position_error, mutual_from_scans, mutual_pose, separations, MutualFix,
+    MutualObservation, MutualParams, MutualReject,
 };

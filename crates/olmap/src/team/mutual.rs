@@ -189,3 +189,52 @@ fn wrap(a: f64) -> f64 {
         w
     }
 }
+
+/// Mutual localisation from the two robots' 2D scans taken at the same time: the
+/// retroreflective beacons of radius `radius` found in each scan (see
+/// [`crate::beacon::detect_circles_reflective`]) are paired, every pair is tried, and the
+/// one whose beacon separations agree best (and within the distractor limit) gives B's pose
+/// in A's scanner frame. Scans are in each robot's scanner frame; beacons sit `d` ahead.
+pub fn mutual_from_scans(
+    scan_a: &crate::cloud::LaserScan,
+    scan_b: &crate::cloud::LaserScan,
+    radius: f64,
+    d: f64,
+    detect: &crate::beacon::ReflectiveParams,
+    params: &MutualParams,
+) -> Result<MutualFix, MutualReject> {
+    let found_a = crate::beacon::detect_circles_reflective(scan_a, radius, detect);
+    let found_b = crate::beacon::detect_circles_reflective(scan_b, radius, detect);
+    if found_a.is_empty() || found_b.is_empty() {
+        return Err(MutualReject::Degenerate(format!(
+            "no beacon pair: {} beacon(s) in A's scan, {} in B's",
+            found_a.len(),
+            found_b.len()
+        )));
+    }
+    let mut best: Option<(f64, MutualFix)> = None;
+    let mut closest_mismatch = f64::INFINITY;
+    for da in &found_a {
+        for db in &found_b {
+            let o = MutualObservation {
+                a: da.range(),
+                alpha: da.bearing(),
+                b: db.range(),
+                beta: db.bearing(),
+                d,
+            };
+            let (s1, s2) = separations(&o);
+            let mismatch = (s1 - s2).abs();
+            closest_mismatch = closest_mismatch.min(mismatch);
+            if let Ok(fix) = mutual_pose(&o, params) {
+                if best.as_ref().is_none_or(|(m, _)| mismatch < *m) {
+                    best = Some((mismatch, fix));
+                }
+            }
+        }
+    }
+    best.map(|(_, fix)| fix).ok_or(MutualReject::Distractor {
+        mismatch: closest_mismatch,
+        limit: params.max_separation_mismatch,
+    })
+}

@@ -549,6 +549,102 @@ fn a_simulated_enclosure_is_mapped_within_two_percent() {
     assert!(free_fraction > 0.97, "{free_fraction}");
 }
 
+#[test]
+fn the_enclosure_mapped_from_mutual_localisation_poses_is_within_two_percent() {
+    use olmap::beacon::ReflectiveParams;
+    use olmap::sim::RobotModel;
+    use olmap::team::{mutual_from_scans, MutualParams};
+    // Robot A stands at one end facing into the room and defines the map frame; robot B
+    // drives around, and at each stop both scan and B's pose comes from the two-way
+    // beacon sighting alone (no odometry, no scan matching).
+    let world = enclosure();
+    // Beacons 0.2 m across: the 0.5° scanner puts three returns on them up to ~6 m.
+    let model = RobotModel {
+        beacon_radius: 0.1,
+        ..RobotModel::front_beacon(0.2)
+    };
+    let robot_a = Pose::from_xyz_ypr(MIN[0] + 0.6, MIN[1] + 2.7, 0.0, 0.0, 0.0, 0.0);
+    let stops = [
+        (2.0, 2.6, 0.4),
+        (3.5, 4.2, -0.5),
+        (4.5, 1.8, 0.7),
+        (6.3, 2.7, 0.2),
+        (5.5, 3.8, -0.8),
+        (3.0, 1.5, 0.6),
+        (5.6, 1.0, -0.3),
+        (2.8, 3.5, 0.0),
+    ];
+    let mut scanner = PlanarScanner::sick_180_half_degree();
+    scanner.noise.sigma = 0.01;
+    let detect = ReflectiveParams {
+        max_rms: 0.02,
+        ..Default::default()
+    };
+    let sensor = model.scanner2d_pose();
+    let sensor_a = robot_a * sensor;
+    let mut grid = OccupancyGrid2d::new(0.05).unwrap();
+    let model2d = SensorModel2d::default();
+    let mut worst = 0.0f64;
+    for (k, &(x, y, turn)) in stops.iter().enumerate() {
+        let (bx, by) = (MIN[0] + x, MIN[1] + y);
+        let facing_a = (robot_a.translation().y - by).atan2(robot_a.translation().x - bx);
+        let robot_b = Pose::from_xyz_ypr(bx, by, 0.0, facing_a + turn, 0.0, 0.0);
+        let sensor_b = robot_b * sensor;
+        let scan_a = scanner.scan(
+            &world,
+            &model.objects(1, &robot_b),
+            &sensor_a,
+            3,
+            2 * k as u64,
+        );
+        let scan_b = scanner.scan(
+            &world,
+            &model.objects(0, &robot_a),
+            &sensor_b,
+            3,
+            2 * k as u64 + 1,
+        );
+        let fix = mutual_from_scans(
+            &scan_a,
+            &scan_b,
+            0.075,
+            0.15,
+            &detect,
+            &MutualParams::default(),
+        )
+        .unwrap_or_else(|e| panic!("stop {k}: {e}"));
+        let t_a_b = Pose::from_xyz_ypr(fix.x, fix.y, 0.0, fix.heading, 0.0, 0.0);
+        let estimate = sensor_a * t_a_b;
+        worst = worst.max((estimate.translation() - sensor_b.translation()).norm());
+        grid.insert_scan(&scan_b, &estimate, &model2d).unwrap();
+        if k == 0 {
+            grid.insert_scan(&scan_a, &sensor_a, &model2d).unwrap();
+        }
+    }
+    let map = grid.to_trinary(Thresholds::default());
+    let (x_lo, x_hi) = measure_walls(
+        &map,
+        0,
+        (MIN[1] + 1.8, MIN[1] + 3.6),
+        MIN[0] + 0.5 * SIZE[0],
+    );
+    let (y_lo, y_hi) = measure_walls(
+        &map,
+        1,
+        (MIN[0] + 3.0, MIN[0] + 4.5),
+        MIN[1] + 0.5 * SIZE[1],
+    );
+    let (w, h) = (x_hi - x_lo, y_hi - y_lo);
+    let (ew, eh) = ((w - SIZE[0]) / SIZE[0], (h - SIZE[1]) / SIZE[1]);
+    eprintln!(
+        "mutual-pose map: worst pose error {worst:.3} m; measured {w:.3} x {h:.3} m: errors \
+         {:+.2} % and {:+.2} %",
+        100.0 * ew,
+        100.0 * eh
+    );
+    assert!(ew.abs() < 0.02 && eh.abs() < 0.02);
+}
+
 // ---------------------------------------------------------------------------------------
 // Position buckets
 
