@@ -242,3 +242,58 @@ fn mutual_localisation_from_simulated_scans_is_accurate_at_any_separation() {
         );
     }
 }
+
+#[test]
+fn the_3d_variant_projects_sightings_of_beacons_above_the_scanners() {
+    use olmap::geometry::Pose;
+    use olmap::sim::{box_room, sightings_at, RobotModel, SightingModel};
+    // Thesis §6.3.3: beacons straight above the 3D scanners; project to the floor, d = 0.
+    let world = box_room(nalgebra::Vector3::new(12.0, 10.0, 3.0));
+    let model = RobotModel::default();
+    let exact = SightingModel {
+        range_sigma: 0.0,
+        angle_sigma: 0.0,
+        ..Default::default()
+    };
+    let mut rng = SimRng::new(3);
+    let mut checked = 0;
+    for _ in 0..50 {
+        let a = Pose::from_xyz_ypr(6.0, 5.0, 0.0, rng.range(-3.1, 3.1), 0.0, 0.0);
+        let (r, t) = (rng.range(1.0, 4.5), rng.range(-3.1, 3.1));
+        let b = Pose::from_xyz_ypr(
+            6.0 + r * t.cos(),
+            5.0 + r * t.sin(),
+            0.0,
+            rng.range(-3.1, 3.1),
+            0.0,
+            0.0,
+        );
+        let objects: Vec<_> = [a, b]
+            .iter()
+            .enumerate()
+            .flat_map(|(k, p)| model.objects(k, p))
+            .collect();
+        let s = sightings_at(&world, &model, &exact, &[a, b], &objects, 0, 0.0, 1);
+        let (Some(ab), Some(ba)) = (
+            s.iter().find(|x| x.observer == 0),
+            s.iter().find(|x| x.observer == 1),
+        ) else {
+            continue; // one is behind the other's mast (outside the 270° view)
+        };
+        let o = MutualObservation::from_3d(
+            ab.range,
+            ab.bearing,
+            ab.elevation,
+            ba.range,
+            ba.bearing,
+            ba.elevation,
+        );
+        let fix = mutual_pose(&o, &MutualParams::default()).unwrap();
+        let truth = a.inverse() * b;
+        assert!((fix.x - truth.translation().x).abs() < 1e-9);
+        assert!((fix.y - truth.translation().y).abs() < 1e-9);
+        assert!(angle_diff(fix.heading, truth.yaw_pitch_roll().0) < 1e-9);
+        checked += 1;
+    }
+    assert!(checked >= 25, "only {checked} two-way sightings");
+}
