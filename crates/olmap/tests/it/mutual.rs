@@ -295,5 +295,6 @@ fn the_3d_variant_projects_sightings_of_beacons_above_the_scanners() {
         assert!(angle_diff(fix.heading, truth.yaw_pitch_roll().0) < 1e-9);
         checked += 1;
     }
-    assert!(checked >= 25, "only {checked} two-way sightings");
+    // Each sees the other in its 270° view about 56 % of the time.
+    assert!(checked >= 15, "only {checked} two-way sightings");
 }
