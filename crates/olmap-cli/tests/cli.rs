@@ -115,30 +115,46 @@ fn convert_refuses_bad_arguments_without_writing() {
 }
 
 #[test]
-fn demo_writes_files_that_read_back() {
+fn demo_simulates_a_team_and_maps_each_robot() {
     let dir = tempfile::tempdir().unwrap();
-    let v = json(&olmap(&[
-        "demo",
-        "--json",
-        "--out",
-        dir.path().to_str().unwrap(),
-    ]));
-    let files = v["files"].as_array().unwrap();
-    assert_eq!(files.len(), 4);
-    let scan_points = v["scan_points"].as_u64().unwrap();
-    // Every ray of the closed room hits something: 720 azimuths x 81 elevations.
-    assert_eq!(scan_points, 720 * 81);
-    // The room's walls as voxels: far fewer than the points, and the map file reads back.
-    let voxels = v["map"]["voxels"].as_u64().unwrap();
-    assert!(voxels > 1000 && voxels < scan_points);
-    let map = olmap::occupancy::read_map(v["map"]["path"].as_str().unwrap())
-        .unwrap()
-        .map;
-    assert_eq!(map.len() as u64, voxels);
-    for f in files {
-        let p = f["path"].as_str().unwrap();
-        let loaded = olmap::io::read_cloud(p).unwrap();
-        assert_eq!(loaded.cloud.len() as u64, f["points"].as_u64().unwrap());
+    let run = || {
+        json(&olmap(&[
+            "demo",
+            "--json",
+            "--robots",
+            "2",
+            "--scans-per-robot",
+            "3",
+            "--out",
+            dir.path().to_str().unwrap(),
+        ]))
+    };
+    let v = run();
+    let robots = v["robots"].as_array().unwrap();
+    assert_eq!(robots.len(), 2);
+    for r in robots {
+        // Maps reload; every placed scan is where the simulation put it (the alignment
+        // issue's tolerance at 0.1 m: a voxel and a degree).
+        let map = olmap::occupancy::read_map(r["map"].as_str().unwrap())
+            .unwrap()
+            .map;
+        assert_eq!(map.len() as u64, r["voxels"].as_u64().unwrap());
+        assert!(r["placed"].as_u64().unwrap() >= 1);
+        assert!(
+            r["translation_error_m"]["max"].as_f64().unwrap() < 0.1,
+            "{r}"
+        );
+        assert!(
+            r["rotation_error_deg"]["max"].as_f64().unwrap() < 1.0,
+            "{r}"
+        );
+    }
+    let back = olmap::io::sim_dataset::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
+    assert_eq!(back.manifest.robots.len(), 2);
+    // A second run replaces its own dataset and gives the same poses.
+    let again = run();
+    for (a, b) in again["robots"].as_array().unwrap().iter().zip(robots) {
+        assert_eq!(a["translation_error_m"], b["translation_error_m"]);
     }
 }
 

@@ -1,206 +1,199 @@
 //! `olmap demo`: the main job on built-in generated data.
 //!
-//! At this stage of the project the demo exercises the foundation: it generates a 3D scan of
-//! a furnished room by ray casting (no download needed), writes it in several formats,
-//! reads every file back, checks that the points survived, and describes the result. The
-//! cooperative multi-robot pipeline replaces this body once the simulator and the mappers
-//! exist.
+//! Simulates a team of robots in the lab world (thesis §6.5: four robots with rotating-
+//! mirror 3D scanners and beacons, stop-and-scan, odometry with error), writes the dataset,
+//! then has every robot build its own map from its scans and odometry (batch mapper,
+//! registration in the 0.1-2.8 m band) and compares every scan pose with the ground truth.
+//! The cooperative team mapper (sightings joining the robots' maps) takes over this
+//! pipeline when it exists; until then each robot maps alone, in its own frame.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{ensure, Context};
 use clap::Args;
-use nalgebra::{Point3, Vector3};
-use olmap::cloud::PointCloud;
-use olmap::geometry::Pose;
-use olmap::io::{self, PcdEncoding, PlyEncoding, WriteOptions};
-use olmap::occupancy::{self, OccupancyList, SensorModel};
+use olmap::geometry::PoseList;
+use olmap::io::sim_dataset::{read_dataset, write_dataset};
+use olmap::mapping::{build_map, evaluate, MapParams, ScanInput};
+use olmap::occupancy;
+use olmap::sim::{simulate, SimConfig, WorldKind};
+use serde_json::json;
 
-use crate::report::cloud_text;
+use crate::args::progress;
 
 /// Arguments of `olmap demo`.
 #[derive(Args)]
 pub struct DemoArgs {
-    /// Folder for the generated files (created if missing).
+    /// Folder for the generated files (created if missing; a dataset left there by an
+    /// earlier demo is replaced).
     #[arg(long, default_value = "olmap-demo")]
     pub out: PathBuf,
+    /// Robots in the team.
+    #[arg(long, default_value_t = 4)]
+    pub robots: usize,
+    /// Stop-and-scan positions per robot.
+    #[arg(long, default_value_t = 10)]
+    pub scans_per_robot: usize,
+    /// Seed of the simulation (the same seed gives the same dataset).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
-/// Distance along a ray to the first hit with an axis-aligned box, entering from outside
-/// (`inside = false`) or leaving it from inside.
-fn ray_box(
-    o: &Point3<f64>,
-    d: &Vector3<f64>,
-    lo: [f64; 3],
-    hi: [f64; 3],
-    inside: bool,
-) -> Option<f64> {
-    let (mut t_in, mut t_out) = (f64::NEG_INFINITY, f64::INFINITY);
-    for i in 0..3 {
-        if d[i].abs() < 1e-12 {
-            if o[i] < lo[i] || o[i] > hi[i] {
-                return None;
-            }
-            continue;
-        }
-        let (a, b) = ((lo[i] - o[i]) / d[i], (hi[i] - o[i]) / d[i]);
-        t_in = t_in.max(a.min(b));
-        t_out = t_out.min(a.max(b));
+/// Removes `dir` only if it is a dataset an earlier demo wrote (its manifest reads as one).
+fn clear_old_dataset(dir: &Path) -> anyhow::Result<()> {
+    if !dir.exists() {
+        return Ok(());
     }
-    if t_in > t_out {
-        return None;
-    }
-    let t = if inside { t_out } else { t_in };
-    (t > 1e-9).then_some(t)
+    read_dataset(dir).with_context(|| {
+        format!(
+            "{} exists and is not an olmap dataset; not touching it",
+            dir.display()
+        )
+    })?;
+    std::fs::remove_dir_all(dir).with_context(|| format!("cannot remove {}", dir.display()))
 }
 
-/// Distance along a ray to a vertical cylinder (centre `c`, radius `r`, z in `[0, h]`).
-fn ray_cylinder(o: &Point3<f64>, d: &Vector3<f64>, c: [f64; 2], r: f64, h: f64) -> Option<f64> {
-    let (ox, oy) = (o.x - c[0], o.y - c[1]);
-    let a = d.x * d.x + d.y * d.y;
-    if a < 1e-12 {
-        return None;
-    }
-    let b = 2.0 * (ox * d.x + oy * d.y);
-    let cc = ox * ox + oy * oy - r * r;
-    let disc = b * b - 4.0 * a * cc;
-    if disc < 0.0 {
-        return None;
-    }
-    let t = (-b - disc.sqrt()) / (2.0 * a);
-    let z = o.z + t * d.z;
-    (t > 1e-9 && (0.0..=h).contains(&z)).then_some(t)
-}
-
-/// A scan of a 10 x 8 x 3 m room with a pillar and a table, from a sensor at 1.2 m height:
-/// 0.5 degree azimuth steps, 1 degree elevation steps from -40 to +40 degrees.
-fn room_scan() -> PointCloud {
-    let sensor = Point3::new(3.0, 3.0, 1.2);
-    let mut pts = Vec::new();
-    for e in -40..=40 {
-        let el = (e as f64).to_radians();
-        for a in 0..720 {
-            let az = (a as f64 * 0.5).to_radians();
-            let d = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            let hits = [
-                ray_box(&sensor, &d, [0.0, 0.0, 0.0], [10.0, 8.0, 3.0], true),
-                ray_box(&sensor, &d, [5.0, 5.2, 0.0], [6.2, 6.0, 0.75], false),
-                ray_cylinder(&sensor, &d, [6.5, 2.5], 0.3, 3.0),
-            ];
-            if let Some(t) = hits.into_iter().flatten().min_by(f64::total_cmp) {
-                // Points in the sensor frame (sensor axes aligned with the room).
-                pts.push((d * t).cast::<f32>().into());
-            }
-        }
-    }
-    PointCloud::from_points(pts)
-}
-
-/// Runs the command.
+/// Runs `olmap demo`.
 pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
+    ensure!(
+        args.robots >= 1 && args.scans_per_robot >= 2,
+        "the demo needs at least one robot and two scans per robot"
+    );
     let start = Instant::now();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let scan = room_scan();
-    let down = scan.voxel_downsample(0.1)?;
-    let outputs: [(&str, &PointCloud, WriteOptions); 4] = [
-        (
-            "room.pcd",
-            &scan,
-            WriteOptions {
-                pcd_encoding: PcdEncoding::BinaryCompressed,
-                ..Default::default()
-            },
-        ),
-        (
-            "room.ply",
-            &scan,
-            WriteOptions {
-                ply_encoding: PlyEncoding::BinaryLittleEndian,
-                ..Default::default()
-            },
-        ),
-        ("room.xyz", &scan, WriteOptions::default()),
-        ("room_voxel_0.1m.pcd", &down, WriteOptions::default()),
-    ];
-    let mut files = Vec::new();
-    for (name, cloud, opts) in outputs {
-        let path = args.out.join(name);
-        io::write_cloud(&path, cloud, &opts)?;
-        let back = io::read_cloud(&path)?;
-        ensure!(
-            back.cloud.points() == cloud.points(),
-            "{}: the points read back differ from the points written",
-            path.display()
-        );
-        let bytes = std::fs::metadata(&path)?.len();
-        files.push((path, back, bytes));
-    }
-    // The scan as an occupancy list: ray traced at 5 cm.
-    let mut map = OccupancyList::new(0.05)?;
-    let insert = map.insert_scan(&scan, &Pose::identity(), &SensorModel::default())?;
-    let map_path = args.out.join("room.olm");
-    occupancy::write_map(&map_path, &map)?;
-    let reread = occupancy::read_map(&map_path)?.map;
-    ensure!(
-        reread == map,
-        "{}: the map read back differs",
-        map_path.display()
-    );
-    let seconds = start.elapsed().as_secs_f64();
-    if args.json {
-        let list: Vec<_> = files
+    let config = SimConfig {
+        world: WorldKind::Lab,
+        seed: args.seed,
+        robots: args.robots,
+        stops: args.scans_per_robot,
+        ..Default::default()
+    };
+    let total = (args.robots * args.scans_per_robot) as u64;
+    let bar = progress(total, "simulate", args.json);
+    let data = simulate(&config, |done, _| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    let dataset_dir = args.out.join("dataset");
+    clear_old_dataset(&dataset_dir)?;
+    write_dataset(&dataset_dir, &data)?;
+    let sim_seconds = start.elapsed().as_secs_f64();
+
+    let params = MapParams {
+        register_band: Some((0.1, 2.8)),
+        keep_scan_maps: false,
+        ..Default::default()
+    };
+    let bar = progress(total, "map", args.json);
+    let mut rows = Vec::new();
+    for (r, robot) in data.robots.iter().enumerate() {
+        let scans: Vec<ScanInput> = robot
+            .scans
             .iter()
-            .map(|(p, l, bytes)| {
-                serde_json::json!({
-                    "path": p.display().to_string(),
-                    "format": l.report.format.name(),
-                    "points": l.cloud.len(),
-                    "bytes": bytes,
+            .enumerate()
+            .map(|(k, cloud)| ScanInput {
+                name: format!("scan{k:03}"),
+                cloud: cloud.clone(),
+                odometry: Some(robot.odometry[k]),
+            })
+            .collect();
+        let done_before = (r * args.scans_per_robot) as u64;
+        let built = build_map(&scans, &params, |done, _| {
+            bar.set_position(done_before + done as u64)
+        })?;
+        let map_path = args.out.join(format!("{}.olm", robot.name));
+        occupancy::write_map(&map_path, &built.map)?;
+        ensure!(
+            occupancy::read_map(&map_path)?.map == built.map,
+            "{}: the map read back differs",
+            map_path.display()
+        );
+        let mut estimate = PoseList::default();
+        for p in &built.placed {
+            estimate.push(p.name.clone(), p.pose);
+        }
+        let poses_path = args.out.join(format!("{}_poses.txt", robot.name));
+        estimate.write_path(&poses_path)?;
+        let mut truth = PoseList::default();
+        for (k, t) in robot.truth.iter().enumerate() {
+            truth.push(format!("scan{k:03}"), *t);
+        }
+        let eval = evaluate(&estimate, &truth)?;
+        rows.push((robot.name.clone(), built, eval, map_path));
+    }
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    let mutual = data.sightings.iter().filter(|s| s.mutual).count();
+    if args.json {
+        let robots: Vec<_> = rows
+            .iter()
+            .map(|(name, built, eval, path)| {
+                json!({
+                    "name": name,
+                    "placed": built.placed.len(),
+                    "scans": args.scans_per_robot,
+                    "map": path.display().to_string(),
+                    "voxels": built.map.len(),
+                    "translation_error_m": {"mean": eval.summary.translation_m[0],
+                        "median": eval.summary.translation_m[1], "max": eval.summary.translation_m[2]},
+                    "rotation_error_deg": {"mean": eval.summary.rotation_deg[0],
+                        "median": eval.summary.rotation_deg[1], "max": eval.summary.rotation_deg[2]},
+                    "seconds": built.seconds,
                 })
             })
             .collect();
-        let v = serde_json::json!({
-            "scan_points": scan.len(),
-            "voxel_points": down.len(),
-            "files": list,
-            "map": {
-                "path": map_path.display().to_string(),
-                "resolution": map.resolution(),
-                "voxels": map.len(),
-                "voxels_traversed": insert.voxels_traversed,
-            },
+        let v = json!({
+            "dataset": dataset_dir.display().to_string(),
+            "world": "lab",
+            "seed": args.seed,
+            "points": data.robots.iter().flat_map(|r| r.scans.iter().map(|s| s.len())).sum::<usize>(),
+            "sightings": data.sightings.len(),
+            "mutual_sightings": mutual,
+            "robots": robots,
+            "simulate_seconds": sim_seconds,
             "seconds": seconds,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
-            "olmap demo: a generated 3D scan of a furnished 10 x 8 x 3 m room (foundation stage:"
+            "olmap demo: {} robots x {} stops in a simulated 20 x 20 m lab (seed {}), enhanced \
+             rotating-mirror scanners, odometry with error",
+            args.robots, args.scans_per_robot, args.seed
         );
-        println!("the cooperative multi-robot pipeline joins this demo as it is built)\n");
-        for (p, l, bytes) in &files {
-            let s = l.cloud.stats();
-            let o = l.cloud.origin();
-            print!(
-                "{}",
-                cloud_text(&p.display().to_string(), &s, &l.report, [o.x, o.y, o.z])
+        println!(
+            "  dataset -> {} ({} sightings, {} of them mutual) in {:.1} s\n",
+            dataset_dir.display(),
+            data.sightings.len(),
+            mutual,
+            sim_seconds
+        );
+        println!(
+            "  each robot maps alone (batch mapper, odometry windows, 0.1-2.8 m registration band):"
+        );
+        println!(
+            "  {:<8} {:>7} {:>9} {:>12} {:>11} {:>11} {:>8}",
+            "robot", "placed", "voxels", "mean err m", "max err m", "max deg", "time s"
+        );
+        for (name, built, eval, _) in &rows {
+            println!(
+                "  {:<8} {:>3}/{:<3} {:>9} {:>12.3} {:>11.3} {:>11.2} {:>8.1}",
+                name,
+                built.placed.len(),
+                args.scans_per_robot,
+                built.map.len(),
+                eval.summary.translation_m[0],
+                eval.summary.translation_m[2],
+                eval.summary.rotation_deg[2],
+                built.seconds
             );
-            println!("  {:<14}{bytes} bytes, read back identical\n", "file");
         }
         println!(
-            "{}\n  occupancy list at {} m: {} voxels from {} rays ({} voxel steps traced), read back identical\n",
-            map_path.display(),
-            map.resolution(),
-            map.len(),
-            insert.rays,
-            insert.voxels_traversed
+            "\n  maps and poses (each in its robot's first-scan frame) in {}; done in {seconds:.1} s",
+            args.out.display()
         );
-        println!("done in {seconds:.2} s; files in {}", args.out.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -11,7 +11,8 @@ mod target;
 
 pub use params::{Dof, Region, SearchParams};
 pub use register::{
-    localize, register, register_to, RegisterParams, Registration, TrustThresholds,
+    localize, register, register_to, register_to_split, RegisterParams, Registration,
+    TrustThresholds,
 };
 pub use search::{exhaustive_search, global_search, Alignment, Candidate, LevelReport};
 pub use significance::significance;

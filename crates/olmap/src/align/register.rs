@@ -188,8 +188,22 @@ pub fn register_to(
     refine_target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    register_to_split(source, source, target, refine_target, params)
+}
+
+/// [`register_to`] searching with `search_source` and refining with `refine_source` (the
+/// same scan, e.g. cut to a height band for the search, whole for ICP, where the floor
+/// and ceiling fix the height the band leaves free).
+pub fn register_to_split(
+    search_source: &PointCloud,
+    refine_source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    params: &RegisterParams,
+) -> Result<Registration> {
+    let source = refine_source;
     let start = Instant::now();
-    let search = global_search(source, target, &params.search)?;
+    let search = global_search(search_source, target, &params.search)?;
     let res = target.pyramid().base().resolution();
     // Refine against the part of the target the source can reach from the search's pose
     // (a large map is mostly out of reach; ICP's cost grows with its target).

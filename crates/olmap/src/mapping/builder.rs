@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use crate::align::{register_to, Region, RegisterParams, Registration, SearchTarget};
+use crate::align::{register_to_split, Region, RegisterParams, Registration, SearchTarget};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Pose};
@@ -252,7 +252,13 @@ impl State<'_> {
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
                 self.registrations += 1;
-                let mut r = register_to(&self.clouds[s], &self.target, &self.refine_map, &params)?;
+                let mut r = register_to_split(
+                    &self.clouds[s],
+                    &self.scans[s].cloud,
+                    &self.target,
+                    &self.refine_map,
+                    &params,
+                )?;
                 check_odometry(&mut r, &prior, tolerance);
                 if r.trusted {
                     return Ok((r, false));
@@ -270,7 +276,13 @@ impl State<'_> {
         }
         params.search.region = Region::Global;
         self.registrations += 1;
-        let mut r = register_to(&self.clouds[s], &self.target, &self.refine_map, &params)?;
+        let mut r = register_to_split(
+            &self.clouds[s],
+            &self.scans[s].cloud,
+            &self.target,
+            &self.refine_map,
+            &params,
+        )?;
         if let Some((prior, distance)) = prediction {
             let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
             check_odometry(&mut r, &prior, tolerance);
@@ -296,7 +308,13 @@ impl State<'_> {
         params.search.prior = prior;
         params.search.region = Region::Window { xy, z, yaw };
         self.registrations += 1;
-        register_to(&self.clouds[s], &self.target, &self.refine_map, &params)
+        register_to_split(
+            &self.clouds[s],
+            &self.scans[s].cloud,
+            &self.target,
+            &self.refine_map,
+            &params,
+        )
     }
 
     /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
@@ -357,7 +375,9 @@ impl State<'_> {
             self.map_box = Some(self.map_box.map_or(fp, |b| b.union(&fp)));
         }
         self.target.add_scan(cloud, &pose)?;
-        self.refine_map.extend_from(&cloud.transformed(&pose));
+        // ICP refines against the whole scans (the floor fixes the height a band leaves free).
+        self.refine_map
+            .extend_from(&self.scans[s].cloud.transformed(&pose));
         self.refine_map = self
             .refine_map
             .voxel_downsample(self.params.refine_map_voxel)?;
