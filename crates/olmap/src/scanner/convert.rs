@@ -4,9 +4,10 @@
 //! * **Mirror angle** (4.9): the encoder ticks give the mirror angle in steps of
 //!   `2 pi / ticks_per_revolution`; the once-per-revolution trigger fixes the absolute
 //!   angle (`trigger_angle`). Tick `k` is at mirror angle `2 pi k / ticks_per_revolution`,
-//!   so the first tick at or after the first trigger is tick
-//!   `ceil(trigger_angle / step)`, the ones after it count up and the ones before it count
-//!   back: a scan may start anywhere in the revolution (the thesis' "on demand scans").
+//!   so the first tick after the first trigger is tick `ceil(trigger_angle / step)` (a
+//!   trigger on a tick angle pins the tick nearest to it in time), the ones after it count
+//!   up and the ones before it count back: a scan may start anywhere in the revolution
+//!   (the thesis' "on demand scans").
 //!   The mirror is taken to turn toward increasing angle. The angle at any time is the
 //!   linear interpolation between the samples (the ticks and the first trigger) around
 //!   it; beyond the first or last sample it is extrapolated with the neighbouring
@@ -161,23 +162,38 @@ impl EncoderHistory {
             ));
         }
         let step = TAU / g.ticks_per_revolution as f64;
-        let first_after = (g.trigger_angle / step - 1e-9).ceil() as i64;
-        let n_before = ticks.partition_point(|&t| t < t_trig) as i64;
+        // Which tick index the trigger pins down. A trigger between ticks: the first tick
+        // after it is tick ceil(trigger_angle / step). A trigger on a tick: that tick is the
+        // one nearest in time (the two fire together; their order in the log is arbitrary).
+        let kf = g.trigger_angle / step;
+        let on_tick = (kf - kf.round()).abs() < 1e-6;
+        let n_before = ticks.partition_point(|&t| t < t_trig);
+        let (anchor, anchor_k) = if on_tick {
+            let nearest = (0..ticks.len())
+                .min_by(|&a, &b| {
+                    (ticks[a] - t_trig)
+                        .abs()
+                        .total_cmp(&(ticks[b] - t_trig).abs())
+                })
+                .expect("at least two ticks");
+            (nearest as i64, kf.round() as i64)
+        } else {
+            (n_before as i64, kf.ceil() as i64)
+        };
         let mut times = Vec::with_capacity(ticks.len() + 1);
         let mut angles = Vec::with_capacity(ticks.len() + 1);
         for (j, &t) in ticks.iter().enumerate() {
-            if j as i64 == n_before && t > t_trig {
+            if !on_tick && j == n_before {
                 times.push(t_trig);
                 angles.push(g.trigger_angle);
             }
-            let k = first_after + j as i64 - n_before;
-            if times.last() == Some(&t) {
+            if times.last().is_some_and(|&last| last >= t) {
                 continue;
             }
             times.push(t);
-            angles.push(k as f64 * step);
+            angles.push((anchor_k + j as i64 - anchor) as f64 * step);
         }
-        if n_before == ticks.len() as i64 {
+        if !on_tick && n_before == ticks.len() {
             times.push(t_trig);
             angles.push(g.trigger_angle);
         }
@@ -420,4 +436,64 @@ fn check_sweep(s: &Sweep, k: usize, last_time: &mut f64) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scanner::MirrorEvent;
+
+    /// Events of a mirror turning at `omega` from angle `a0` over `[0, t_end]`.
+    fn events(g: &MirrorGeometry, a0: f64, omega: f64, t_end: f64) -> Vec<MirrorEvent> {
+        let step = TAU / g.ticks_per_revolution as f64;
+        let mut ev = Vec::new();
+        let a1 = a0 + omega * t_end;
+        for k in (a0 / step).ceil() as i64..=(a1 / step).floor() as i64 {
+            ev.push(MirrorEvent {
+                time: (k as f64 * step - a0) / omega,
+                kind: MirrorEventKind::Tick,
+            });
+        }
+        let m0 = ((a0 - g.trigger_angle) / TAU).ceil() as i64;
+        let m1 = ((a1 - g.trigger_angle) / TAU).floor() as i64;
+        for m in m0..=m1 {
+            ev.push(MirrorEvent {
+                time: (g.trigger_angle + m as f64 * TAU - a0) / omega,
+                kind: MirrorEventKind::Trigger,
+            });
+        }
+        ev.sort_by(|a, b| a.time.total_cmp(&b.time));
+        ev
+    }
+
+    #[test]
+    fn interpolated_angle_is_exact_for_a_steady_mirror_from_any_phase() {
+        for trigger_on_tick in [false, true] {
+            let mut g = MirrorGeometry::standard();
+            let step = TAU / g.ticks_per_revolution as f64;
+            if trigger_on_tick {
+                g.trigger_angle = 17.0 * step;
+            }
+            for a0 in [0.0, 0.2, g.trigger_angle, 3.0, 5.9, 7.5] {
+                let omega = 0.37;
+                let t_end = 1.3 * TAU / omega;
+                let log = MirrorLog {
+                    header: g.clone(),
+                    sweeps: Vec::new(),
+                    events: events(&g, a0, omega, t_end),
+                };
+                let h = EncoderHistory::from_log(&log).unwrap();
+                assert_eq!(h.trigger_mismatches, 0);
+                let (t0, t1) = h.span();
+                for k in 0..=200 {
+                    let t = t0 + (t1 - t0) * k as f64 / 200.0;
+                    let a = h.angle_at(t, 0.0).unwrap();
+                    // The absolute angle is known modulo a full turn.
+                    let off = crate::geometry::wrap_angle(a - (a0 + omega * t));
+                    assert!(off.abs() < 1e-9, "a0 {a0} t {t}: {off}");
+                }
+                assert!(h.angle_at(t1 + 10.0, 1.0).is_none());
+            }
+        }
+    }
 }

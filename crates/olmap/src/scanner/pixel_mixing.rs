@@ -162,3 +162,35 @@ pub fn mixed_pixels(image: &RangeImage, params: &MixedPixelParams) -> Result<Vec
     }
     Ok(flags)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_a_return_between_foreground_and_background_only() {
+        // A slanted floor-like surface (range growing steadily along the rows and the
+        // columns: a grazing view) with a foreground block in one corner.
+        let (rows, cols) = (12, 14);
+        let mut v = Vec::new();
+        for r in 0..rows {
+            for c in 0..cols {
+                let fg = r < 6 && c < 6;
+                v.push(if fg {
+                    1.0
+                } else {
+                    2.0 + 0.3 * c as f32 + 0.02 * r as f32
+                });
+            }
+        }
+        // Mixed pixels: one on the block's right edge (along theta), one below it
+        // (along phi).
+        v[3 * cols + 6] = 1.8;
+        v[6 * cols + 2] = 1.5;
+        let img = RangeImage::new(rows, cols, v).unwrap();
+        let f = mixed_pixels(&img, &MixedPixelParams::default()).unwrap();
+        let flagged: Vec<usize> = (0..f.len()).filter(|&i| f[i]).collect();
+        assert_eq!(flagged, vec![3 * cols + 6, 6 * cols + 2]);
+        assert!(RangeImage::new(2, 2, vec![1.0; 3]).is_err());
+    }
+}

@@ -520,3 +520,53 @@ fn triangulation_error_grows_as_4_6() {
         }
     }
 }
+
+#[test]
+fn visible_volume_and_range_limits() {
+    let world = room(true);
+    let t = pose();
+    let mut s = MirrorScanner::enhanced();
+    s.noise = RangeNoise::none();
+    s.mirror_period /= 4.0;
+    s.revolutions = 1.0;
+    let (_, log) = s.scan_raw(&world, &[], &t, 5, 0);
+    let all = convert(&log, true);
+    // Visible-volume limits in the manner of thesis (4.11): 0.5 < r < 3 (a short max range
+    // here so that it bites), |theta| < 40 deg, and a window of reflected elevations
+    // around straight ahead (phi = 270 deg for the enhanced mounting).
+    let window = (200f64.to_radians(), 300f64.to_radians());
+    let params = ConvertParams {
+        max_range: Some(3.0),
+        min_range: 0.5,
+        theta_limit: Some(40f64.to_radians()),
+        elevation_window: Some(window),
+        ..ConvertParams::default()
+    };
+    let out = convert_log(&log, &params).unwrap();
+    let st = out.stats;
+    assert!(
+        st.beyond_max_range > 0 && st.outside_elevation > 0,
+        "{st:?}"
+    );
+    assert!(st.outside_mirror > all.stats.outside_mirror, "{st:?}");
+    assert!(out.cloud.len() > 1000 && out.cloud.len() < all.cloud.len());
+    for src in &out.sources {
+        let sw = &log.sweeps[src[0] as usize];
+        let i = src[1] as usize;
+        let r = sw.ranges[i] as f64;
+        assert!((0.5..=3.0).contains(&r), "{r}");
+        assert!(sw.angle(i).abs() <= 40f64.to_radians() + 1e-12);
+        let phi = (2.0 * s.mirror_angle(sw.beam_time(i))).rem_euclid(std::f64::consts::TAU);
+        assert!(phi >= window.0 - 1e-9 && phi <= window.1 + 1e-9, "{phi}");
+    }
+    // The same points as the unrestricted conversion, just fewer.
+    let full: std::collections::HashMap<[u32; 2], Point3<f32>> = all
+        .sources
+        .iter()
+        .copied()
+        .zip(all.cloud.points().iter().copied())
+        .collect();
+    for (src, p) in out.sources.iter().zip(out.cloud.points()) {
+        assert_eq!(full[src], *p);
+    }
+}
