@@ -64,6 +64,8 @@ enum Command {
     Beacons(commands::beacons::BeaconsArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
+    /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
+    Scanner(commands::scanner::ScannerArgs),
 }
 
 fn main() -> ExitCode {
@@ -83,6 +85,7 @@ fn main() -> ExitCode {
         Command::Demo(a) => commands::demo::run(&a),
         Command::Grid2d(a) => commands::grid2d::run(&a),
         Command::Beacons(a) => commands::beacons::run(&a),
+        Command::Scanner(a) => commands::scanner::run(&a),
     };
     match result {
         Ok(code) => code,

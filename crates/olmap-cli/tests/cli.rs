@@ -661,3 +661,67 @@ fn mutual_localisation_from_two_simulated_scans() {
     // The thesis' bound (3.37) for 1 cm noise and a 0.15 m beacon: a few centimetres.
     assert!(err < 0.05, "{err}");
 }
+
+#[test]
+fn scanner_convert_and_repeatability_of_a_simulated_raw_log() {
+    use olmap::geometry::Pose;
+    use olmap::sim::{box_room, MirrorScanner, RangeNoise};
+    let dir = tempfile::tempdir().unwrap();
+    let size = nalgebra::Vector3::new(6.0, 5.0, 3.0);
+    let world = box_room(size);
+    let t = Pose::from_xyz_ypr(2.5, 2.0, 1.2, 0.3, 0.0, 0.0);
+    let mut s = MirrorScanner::enhanced();
+    s.noise = RangeNoise::none();
+    s.mirror_period /= 4.0;
+    s.revolutions = 1.0;
+    s.start_phase = 1.1;
+    let (truth, log) = s.scan_raw(&world, &[], &t, 1, 0);
+    let raw = dir.path().join("scan.mirror");
+    log.write_path(&raw).unwrap();
+    let pcd = dir.path().join("scan.pcd");
+    let v = json(&olmap(&[
+        "scanner",
+        "convert",
+        raw.to_str().unwrap(),
+        "-o",
+        pcd.to_str().unwrap(),
+        "--filter-mixed",
+        "--json",
+    ]));
+    assert_eq!(v["mounting"], "enhanced");
+    let n = v["points"].as_u64().unwrap() as usize;
+    // Exact returns in a bare room: nothing is a mixed pixel, every return comes back.
+    assert_eq!(v["dropped"]["mixed_pixels"], 0, "{v}");
+    assert_eq!(n, truth.len(), "{v}");
+    let cloud = olmap::io::read_cloud(&pcd).unwrap().cloud;
+    assert_eq!(cloud.len(), n);
+    for p in cloud.points() {
+        let w = t.transform_point(&nalgebra::Point3::new(p.x as f64, p.y as f64, p.z as f64));
+        let d = (0..3)
+            .map(|k| w[k].abs().min((w[k] - size[k]).abs()))
+            .fold(f64::INFINITY, f64::min);
+        assert!(d < 1e-4, "{w} is {d} m off the room");
+    }
+    let r = json(&olmap(&[
+        "scanner",
+        "repeatability",
+        pcd.to_str().unwrap(),
+        pcd.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(r["mean"].as_f64().unwrap(), 0.0);
+    assert_eq!(r["points"].as_u64().unwrap() as usize, n);
+    // A log without encoder events is an error, not a panic.
+    let mut bad = log.clone();
+    bad.events.clear();
+    bad.write_path(&raw).unwrap();
+    let out = olmap(&[
+        "scanner",
+        "convert",
+        raw.to_str().unwrap(),
+        "-o",
+        pcd.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("trigger"));
+}

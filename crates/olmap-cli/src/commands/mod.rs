@@ -10,5 +10,6 @@ pub mod map;
 pub mod mapping;
 pub mod mutual;
 pub mod poses;
+pub mod scanner;
 pub mod simulate;
 pub mod voxelize;

@@ -43,9 +43,22 @@
 //! beams reflected back toward the scanner (`phi` within [`MirrorGeometry::back_margin`] of
 //! 180°) give no measurement: [`MirrorGeometry::reflects`].
 
+mod convert;
+mod error_model;
+mod pixel_mixing;
 mod raw_log;
+mod repeatability;
+mod triangulation;
 
+pub use convert::{convert_log, ConvertParams, ConvertStats, ConvertedScan, EncoderHistory};
+pub use error_model::{cartesian_error, digitisation_error, update_rate_error};
+pub use pixel_mixing::{mixed_pixels, MixedPixelParams, RangeImage};
 pub use raw_log::{MirrorEvent, MirrorEventKind, MirrorLog, Sweep};
+pub use repeatability::{repeatability, RepeatabilityParams, RepeatabilityReport};
+pub use triangulation::{
+    intersect_ray_plane, optimal_baseline, triangulate_2d, triangulate_pixel,
+    triangulation_range_error, LaserPlane, PinholeIntrinsics, Ray,
+};
 
 use nalgebra::{Point3, Rotation3, Vector3};
 

@@ -11,6 +11,7 @@ mod mutual;
 mod occupancy;
 mod real_data;
 mod round_trip;
+mod scanner;
 mod sim_robots;
 mod sim_scanners;
 mod sim_world;
