@@ -15,7 +15,7 @@ use anyhow::{ensure, Context};
 use clap::Args;
 use olmap::geometry::PoseList;
 use olmap::io::sim_dataset::{read_dataset, write_dataset};
-use olmap::mapping::{build_map, evaluate, MapParams, ScanInput};
+use olmap::mapping::{build_map, evaluate, MapParams};
 use olmap::occupancy;
 use olmap::sim::{simulate, SimConfig, WorldKind};
 use serde_json::json;
@@ -90,16 +90,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
     let bar = progress(total, "map", args.json);
     let mut rows = Vec::new();
     for (r, robot) in data.robots.iter().enumerate() {
-        let scans: Vec<ScanInput> = robot
-            .scans
-            .iter()
-            .enumerate()
-            .map(|(k, cloud)| ScanInput {
-                name: format!("scan{k:03}"),
-                cloud: cloud.clone(),
-                odometry: Some(robot.odometry[k]),
-            })
-            .collect();
+        let scans = robot.scan_inputs();
         let done_before = (r * args.scans_per_robot) as u64;
         let built = build_map(&scans, &params, |done, _| {
             bar.set_position(done_before + done as u64)

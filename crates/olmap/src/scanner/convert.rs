@@ -140,18 +140,8 @@ impl EncoderHistory {
             }
             last = e.time;
         }
-        let ticks: Vec<f64> = log
-            .events
-            .iter()
-            .filter(|e| e.kind == MirrorEventKind::Tick)
-            .map(|e| e.time)
-            .collect();
-        let triggers: Vec<f64> = log
-            .events
-            .iter()
-            .filter(|e| e.kind == MirrorEventKind::Trigger)
-            .map(|e| e.time)
-            .collect();
+        let ticks: Vec<f64> = log.event_times(MirrorEventKind::Tick);
+        let triggers: Vec<f64> = log.event_times(MirrorEventKind::Trigger);
         let Some(&t_trig) = triggers.first() else {
             return bad("no trigger event: the absolute mirror angle is unknown".into());
         };

@@ -120,6 +120,15 @@ fn invalid_input(msg: String) -> std::io::Error {
 }
 
 impl MirrorLog {
+    /// The times of the events of one kind, in log order.
+    pub fn event_times(&self, kind: MirrorEventKind) -> Vec<f64> {
+        self.events
+            .iter()
+            .filter(|e| e.kind == kind)
+            .map(|e| e.time)
+            .collect()
+    }
+
     /// Writes the log (see the module documentation). Fails when the sweeps or the events
     /// are not in time order or a sweep's intensities do not match its ranges.
     pub fn write<W: Write>(&self, mut w: W) -> std::io::Result<()> {

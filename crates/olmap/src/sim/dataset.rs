@@ -125,6 +125,21 @@ pub struct SimRobot {
     pub raw_logs: Vec<MirrorLog>,
 }
 
+impl SimRobot {
+    /// The robot's scans as map-building input (`scanNNN` names, odometry priors).
+    pub fn scan_inputs(&self) -> Vec<crate::mapping::ScanInput> {
+        self.scans
+            .iter()
+            .enumerate()
+            .map(|(k, cloud)| crate::mapping::ScanInput {
+                name: format!("scan{k:03}"),
+                cloud: cloud.clone(),
+                odometry: Some(self.odometry[k]),
+            })
+            .collect()
+    }
+}
+
 /// A simulated run.
 #[derive(Debug, Clone)]
 pub struct SimDataset {

@@ -247,7 +247,7 @@ fn datasets_are_byte_identical_for_a_seed_and_read_back() {
 
 #[test]
 fn a_simulated_robot_maps_its_lab_with_a_register_band() {
-    use olmap::mapping::{build_map, MapParams, ScanInput};
+    use olmap::mapping::{build_map, MapParams};
     // One robot, six stops, the enhanced mirror scanner (sigma 0.02 m), typical odometry.
     let config = SimConfig {
         world: WorldKind::Lab,
@@ -258,16 +258,7 @@ fn a_simulated_robot_maps_its_lab_with_a_register_band() {
     };
     let data = simulate(&config, |_, _| {}).unwrap();
     let robot = &data.robots[0];
-    let scans: Vec<ScanInput> = robot
-        .scans
-        .iter()
-        .enumerate()
-        .map(|(k, cloud)| ScanInput {
-            name: format!("scan{k:03}"),
-            cloud: cloud.clone(),
-            odometry: Some(robot.odometry[k]),
-        })
-        .collect();
+    let scans = robot.scan_inputs();
     let params = MapParams {
         register_band: Some((0.1, 2.8)),
         ..Default::default()

@@ -490,18 +490,8 @@ fn mirror_events_follow_the_mirror() {
         scanner.sweep_rate = 5.0; // few sweeps: events are the subject here
         let (_, log) = scanner.scan_raw(&world, &[], &pose(), 1, 0);
         let n = log.header.ticks_per_revolution as f64;
-        let ticks: Vec<f64> = log
-            .events
-            .iter()
-            .filter(|e| e.kind == MirrorEventKind::Tick)
-            .map(|e| e.time)
-            .collect();
-        let triggers: Vec<f64> = log
-            .events
-            .iter()
-            .filter(|e| e.kind == MirrorEventKind::Trigger)
-            .map(|e| e.time)
-            .collect();
+        let ticks: Vec<f64> = log.event_times(MirrorEventKind::Tick);
+        let triggers: Vec<f64> = log.event_times(MirrorEventKind::Trigger);
         // Ticks every 2 pi / n of mirror angle at the configured speed.
         for w in ticks.windows(2) {
             assert!((w[1] - w[0] - period / n).abs() < 1e-9, "{w:?}");
