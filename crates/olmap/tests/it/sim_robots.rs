@@ -274,3 +274,64 @@ fn a_simulated_robot_maps_its_lab_with_a_register_band() {
         assert!(e < 0.1 && r < 1.0, "{}: {e:.3} m, {r:.2} deg", p.name);
     }
 }
+
+#[test]
+fn robot_clearing_removes_the_sighted_robot_and_nothing_else() {
+    use olmap::team::{clear_robots, ClearingParams};
+    // Robot 0 scans robot 1 standing 3 m ahead in an empty room; robot 0's sighting gives
+    // robot 1's beacon (above its scanner, so over its centre) in robot 0's frame.
+    let world = room(false);
+    let model = RobotModel::default();
+    let a = Pose::from_xyz_ypr(2.0, 3.0, 0.0, 0.0, 0.0, 0.0);
+    let b = Pose::from_xyz_ypr(5.0, 3.2, 0.0, 1.0, 0.0, 0.0);
+    let s = sight(&world, &[a, b], &exact());
+    let seen = s.iter().find(|x| x.observer == 0).expect("a sees b");
+    let lidar = SpinningLidar {
+        noise: olmap::sim::RangeNoise::none(),
+        ..Default::default()
+    };
+    let scan = lidar
+        .scan(
+            &world,
+            &model.objects(1, &b),
+            &(a * model.sensor_pose()),
+            1,
+            0,
+        )
+        .transformed(&model.sensor_pose());
+    // Robot 1's body and beacon, in robot 0's frame: within its radius of (3, 0.2).
+    let on_robot = |p: &nalgebra::Point3<f32>| {
+        ((p.x as f64 - 3.0).powi(2) + (p.y as f64 - 0.2).powi(2)).sqrt() < model.body_radius + 1e-3
+    };
+    let before = scan.points().iter().filter(|p| on_robot(p)).count();
+    assert!(before > 50, "the lidar sees robot 1 ({before} points)");
+    let params = ClearingParams {
+        radius: model.body_radius + 0.1,
+        height: 2.0,
+    };
+    let (kept, removed) = clear_robots(&scan, &[(seen.beacon.x, seen.beacon.y)], &params).unwrap();
+    assert_eq!(kept.points().iter().filter(|p| on_robot(p)).count(), 0);
+    assert_eq!(kept.len() + removed, scan.len());
+    // Only what stood within the cylinder went (here: the robot and the floor under it).
+    let near = |p: &nalgebra::Point3<f32>| {
+        ((p.x as f64 - seen.beacon.x).powi(2) + (p.y as f64 - seen.beacon.y).powi(2)).sqrt()
+            <= params.radius
+    };
+    assert_eq!(
+        removed,
+        scan.points()
+            .iter()
+            .filter(|p| near(p) && p.z < 2.0)
+            .count()
+    );
+    assert!(removed >= before);
+    assert!(clear_robots(
+        &scan,
+        &[],
+        &ClearingParams {
+            radius: f64::NAN,
+            height: 2.0
+        }
+    )
+    .is_err());
+}
