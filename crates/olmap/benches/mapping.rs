@@ -10,7 +10,6 @@ use divan::counter::ItemsCount;
 use divan::Bencher;
 use olmap::fixtures::{hall, hall_trajectory, scan_of};
 use olmap::geometry::Pose;
-use olmap::io::{self, slam6d, ReadOptions};
 use olmap::mapping::{build_map, MapParams, ScanInput};
 
 fn main() {
@@ -18,24 +17,9 @@ fn main() {
 }
 
 fn threedtk(odometry: bool) -> Vec<ScanInput> {
-    let Some(d) = olmap::test_data::dir() else {
-        return Vec::new();
-    };
-    let valid = ReadOptions {
-        uos_valid_only: true,
-        ..Default::default()
-    };
-    (0..3)
-        .map(|i| ScanInput {
-            name: format!("scan00{i}"),
-            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
-                .unwrap()
-                .cloud,
-            odometry: odometry.then(|| {
-                slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()
-            }),
-        })
-        .collect()
+    olmap::test_data::dir()
+        .map(|d| olmap::fixtures::threedtk_scans(&d, odometry).unwrap())
+        .unwrap_or_default()
 }
 
 fn synthetic(n: usize, odometry: bool) -> Vec<ScanInput> {

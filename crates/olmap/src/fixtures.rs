@@ -138,3 +138,32 @@ pub fn hall_trajectory(n: usize, spacing: f64) -> Vec<Pose> {
         })
         .collect()
 }
+
+/// The three 3DTK example scans of the shared data folder `data_dir` (`3dtk_dat/scan00N.3d`,
+/// 3DTK's validity filter applied) as map-building input, with their `.pose` odometry when
+/// `odometry`.
+pub fn threedtk_scans(
+    data_dir: &std::path::Path,
+    odometry: bool,
+) -> crate::Result<Vec<crate::mapping::ScanInput>> {
+    let valid = crate::io::ReadOptions {
+        uos_valid_only: true,
+        ..Default::default()
+    };
+    (0..3)
+        .map(|i| {
+            let base = data_dir.join(format!("3dtk_dat/scan00{i}"));
+            Ok(crate::mapping::ScanInput {
+                name: format!("scan00{i}"),
+                cloud: crate::io::read_cloud_with(base.with_extension("3d"), &valid)?.cloud,
+                odometry: if odometry {
+                    Some(crate::io::slam6d::read_pose_path(
+                        base.with_extension("pose"),
+                    )?)
+                } else {
+                    None
+                },
+            })
+        })
+        .collect()
+}

@@ -239,7 +239,7 @@ impl State<'_> {
         let prediction = self.predict(s);
         if let Some((prior, distance)) = prediction {
             let (xy, z, yaw) = self.params.odometry_window;
-            let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
+            let tolerance = self.odometry_tolerance(distance);
             let mut windows: Vec<f64> = vec![1.0, 2.0, 4.0];
             if tolerance > 4.0 * xy {
                 windows.push(tolerance / xy);
@@ -251,14 +251,7 @@ impl State<'_> {
                     z: z * grow,
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
-                self.registrations += 1;
-                let mut r = register_to_split(
-                    &self.clouds[s],
-                    &self.scans[s].cloud,
-                    &self.target,
-                    &self.refine_map,
-                    &params,
-                )?;
+                let mut r = self.run(s, &params)?;
                 check_odometry(&mut r, &prior, tolerance);
                 if r.trusted {
                     return Ok((r, false));
@@ -275,17 +268,9 @@ impl State<'_> {
             }
         }
         params.search.region = Region::Global;
-        self.registrations += 1;
-        let mut r = register_to_split(
-            &self.clouds[s],
-            &self.scans[s].cloud,
-            &self.target,
-            &self.refine_map,
-            &params,
-        )?;
+        let mut r = self.run(s, &params)?;
         if let Some((prior, distance)) = prediction {
-            let tolerance = self.params.odometry_tolerance.max(0.25 * distance);
-            check_odometry(&mut r, &prior, tolerance);
+            check_odometry(&mut r, &prior, self.odometry_tolerance(distance));
         }
         match best {
             Some(b) if !r.trusted && b.search.overlap > r.search.overlap => Ok((b, false)),
@@ -307,14 +292,25 @@ impl State<'_> {
         let (xy, z, yaw) = self.params.odometry_window;
         params.search.prior = prior;
         params.search.region = Region::Window { xy, z, yaw };
+        self.run(s, &params)
+    }
+
+    /// One registration of scan `s` against the map (searching with its registration
+    /// cloud, refining with the whole scan), counted.
+    fn run(&mut self, s: usize, params: &RegisterParams) -> Result<Registration> {
         self.registrations += 1;
         register_to_split(
             &self.clouds[s],
             &self.scans[s].cloud,
             &self.target,
             &self.refine_map,
-            &params,
+            params,
         )
+    }
+
+    /// How far a match may be from an odometry prediction made over `distance` metres.
+    fn odometry_tolerance(&self, distance: f64) -> f64 {
+        self.params.odometry_tolerance.max(0.25 * distance)
     }
 
     /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
@@ -359,9 +355,7 @@ impl State<'_> {
         let Some(fp) = footprint(&self.clouds[s], &prior) else {
             return false;
         };
-        let margin = (4.0 * self.params.odometry_window.0)
-            .max(self.params.odometry_tolerance)
-            .max(0.25 * distance);
+        let margin = (4.0 * self.params.odometry_window.0).max(self.odometry_tolerance(distance));
         let widened = Aabb::new(
             fp.min - nalgebra::Vector3::repeat(margin),
             fp.max + nalgebra::Vector3::repeat(margin),

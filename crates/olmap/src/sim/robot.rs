@@ -6,7 +6,7 @@ use nalgebra::Point3;
 use super::rng::SimRng;
 use super::shape::{Material, Object, Shape, ROBOT_ID_BASE};
 use super::world::World;
-use crate::geometry::Pose;
+use crate::geometry::{wrap_angle, Pose};
 
 /// Where a robot's retroreflective beacon is mounted.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -281,23 +281,13 @@ pub fn plan_trajectories(
             }
             // Boxed in: turn on the spot and scan again.
             let s = chosen.unwrap_or((x, y, yaw + rng.range(2.0, 4.0)));
-            let wrapped = (s.0, s.1, wrap(s.2));
+            let wrapped = (s.0, s.1, wrap_angle(s.2));
             next.push(wrapped);
             out[r].push(pose(&wrapped));
         }
         states = next;
     }
     Some(out)
-}
-
-fn wrap(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let w = a.rem_euclid(t);
-    if w > std::f64::consts::PI {
-        w - t
-    } else {
-        w
-    }
 }
 
 /// Odometry poses for a true trajectory: the first at the identity, each next one the

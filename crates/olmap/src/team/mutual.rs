@@ -12,6 +12,7 @@
 use nalgebra::Complex;
 
 use crate::error::{Error, Result};
+use crate::geometry::wrap_angle;
 
 /// A two-way observation: A saw B's beacon at `(a, alpha)`, B saw A's at `(b, beta)`, both
 /// beacons `d` ahead of their scanners.
@@ -151,7 +152,7 @@ pub fn mutual_pose(
     }
     let e_theta = (ea * o.a - d) / den12;
     let c = (ea * eb * (o.a * o.b) - d * d) / den13;
-    let heading = wrap(e_theta.arg() - o.beta + std::f64::consts::PI);
+    let heading = wrap_angle(e_theta.arg() - o.beta + std::f64::consts::PI);
     Ok(MutualFix {
         x: c.re,
         y: c.im,
@@ -178,16 +179,6 @@ pub fn expected_position_error(
         )));
     }
     Ok(range_error + beacon_width + o.a / o.b * offset_error)
-}
-
-fn wrap(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let w = (a + std::f64::consts::PI).rem_euclid(t) - std::f64::consts::PI;
-    if w <= -std::f64::consts::PI {
-        w + t
-    } else {
-        w
-    }
 }
 
 /// Mutual localisation from the two robots' 2D scans taken at the same time: the

@@ -436,6 +436,15 @@ fn measure_walls(map: &TrinaryGrid, axis: usize, band: (f64, f64), middle: f64) 
     (median(lows), median(highs))
 }
 
+/// The enclosure's four wall positions measured in a map, through the middle bands that
+/// miss the boxes: `((x_lo, x_hi), (y_lo, y_hi))`.
+fn enclosure_walls(map: &TrinaryGrid) -> ((f64, f64), (f64, f64)) {
+    (
+        measure_walls(map, 0, (MIN[1] + 1.8, MIN[1] + 3.6), MIN[0] + 0.5 * SIZE[0]),
+        measure_walls(map, 1, (MIN[0] + 3.0, MIN[0] + 4.5), MIN[1] + 0.5 * SIZE[1]),
+    )
+}
+
 fn inside_box(x: f64, y: f64, margin: f64) -> bool {
     BOXES.iter().any(|b| {
         x > MIN[0] + b[0] - margin
@@ -473,18 +482,7 @@ fn a_simulated_enclosure_is_mapped_within_two_percent() {
     let map = grid.to_trinary(Thresholds::default());
 
     // Wall-to-wall dimensions from the occupied cells through the middle bands.
-    let (x_lo, x_hi) = measure_walls(
-        &map,
-        0,
-        (MIN[1] + 1.8, MIN[1] + 3.6),
-        MIN[0] + 0.5 * SIZE[0],
-    );
-    let (y_lo, y_hi) = measure_walls(
-        &map,
-        1,
-        (MIN[0] + 3.0, MIN[0] + 4.5),
-        MIN[1] + 0.5 * SIZE[1],
-    );
+    let ((x_lo, x_hi), (y_lo, y_hi)) = enclosure_walls(&map);
     let (w, h) = (x_hi - x_lo, y_hi - y_lo);
     let (ew, eh) = ((w - SIZE[0]) / SIZE[0], (h - SIZE[1]) / SIZE[1]);
     eprintln!(
@@ -622,18 +620,7 @@ fn the_enclosure_mapped_from_mutual_localisation_poses_is_within_two_percent() {
         }
     }
     let map = grid.to_trinary(Thresholds::default());
-    let (x_lo, x_hi) = measure_walls(
-        &map,
-        0,
-        (MIN[1] + 1.8, MIN[1] + 3.6),
-        MIN[0] + 0.5 * SIZE[0],
-    );
-    let (y_lo, y_hi) = measure_walls(
-        &map,
-        1,
-        (MIN[0] + 3.0, MIN[0] + 4.5),
-        MIN[1] + 0.5 * SIZE[1],
-    );
+    let ((x_lo, x_hi), (y_lo, y_hi)) = enclosure_walls(&map);
     let (w, h) = (x_hi - x_lo, y_hi - y_lo);
     let (ew, eh) = ((w - SIZE[0]) / SIZE[0], (h - SIZE[1]) / SIZE[1]);
     eprintln!(

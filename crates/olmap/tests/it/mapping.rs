@@ -1,27 +1,13 @@
 //! Map building on real data (3DTK, with and without odometry; a foreign scan mixed in).
 
 use olmap::geometry::{PoseError, PoseList};
-use olmap::io::{self, slam6d, ReadOptions};
+use olmap::io::{self, slam6d};
 use olmap::mapping::{build_map, evaluate, MapMode, MapParams, ScanInput};
 
 use crate::data;
 
 fn threedtk(d: &std::path::Path, odometry: bool) -> Vec<ScanInput> {
-    let valid = ReadOptions {
-        uos_valid_only: true,
-        ..Default::default()
-    };
-    (0..3)
-        .map(|i| ScanInput {
-            name: format!("scan00{i}"),
-            cloud: io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
-                .unwrap()
-                .cloud,
-            odometry: odometry.then(|| {
-                slam6d::read_pose_path(d.join(format!("3dtk_dat/scan00{i}.pose"))).unwrap()
-            }),
-        })
-        .collect()
+    olmap::fixtures::threedtk_scans(d, odometry).unwrap()
 }
 
 fn check_against_reference(

@@ -124,24 +124,7 @@ fn convert(log: &MirrorLog, correction: bool) -> ConvertedScan {
 /// Both mountings, trigger phases all round the revolution, several mirror speeds. A
 /// whole revolution is logged so the trigger is always seen.
 fn variants() -> Vec<(String, MirrorScanner)> {
-    let mut v = Vec::new();
-    for base in [MirrorScanner::standard(), MirrorScanner::enhanced()] {
-        for phase in [0.0, 0.3, 2.0, 4.4, -1.0] {
-            for speed_up in [1.0, 3.7] {
-                let mut s = base.clone();
-                s.start_phase = phase;
-                s.mirror_period = base.mirror_period / speed_up;
-                s.revolutions = 1.0;
-                s.noise = RangeNoise::none();
-                let name = format!(
-                    "{:?} phase {phase} period {}",
-                    s.geometry.mounting, s.mirror_period
-                );
-                v.push((name, s));
-            }
-        }
-    }
-    v
+    crate::sim_scanners::exact_mirror_variants(&[0.0, 0.3, 2.0, 4.4, -1.0], &[1.0, 3.7], Some(1.0))
 }
 
 #[test]

@@ -112,15 +112,23 @@ fn planar_exact_returns_lie_on_the_room() {
     assert_eq!(PlanarScanner::sick_100_quarter_degree().beams(), 401);
 }
 
-/// The mirror scanners, exact, over several start phases and mirror speeds.
-fn exact_mirror_variants() -> Vec<(String, MirrorScanner)> {
+/// Both mirror scanners, exact, over the given start phases and mirror speed-ups (and
+/// logging `revolutions` of the mirror when set), each with a name.
+pub(crate) fn exact_mirror_variants(
+    phases: &[f64],
+    speed_ups: &[f64],
+    revolutions: Option<f64>,
+) -> Vec<(String, MirrorScanner)> {
     let mut v = Vec::new();
     for base in [MirrorScanner::standard(), MirrorScanner::enhanced()] {
-        for phase in [0.0, 1.0, 2.5] {
-            for speed_up in [1.0, 4.0] {
+        for &phase in phases {
+            for &speed_up in speed_ups {
                 let mut s = base.clone();
                 s.start_phase = phase;
                 s.mirror_period = base.mirror_period / speed_up;
+                if let Some(r) = revolutions {
+                    s.revolutions = r;
+                }
                 s.noise = RangeNoise::none();
                 let name = format!(
                     "{:?} phase {phase} period {}",
@@ -137,7 +145,7 @@ fn exact_mirror_variants() -> Vec<(String, MirrorScanner)> {
 fn mirror_exact_returns_lie_on_the_room_and_match_the_log() {
     let world = room(vec![]);
     let t = pose();
-    for (name, scanner) in exact_mirror_variants() {
+    for (name, scanner) in exact_mirror_variants(&[0.0, 1.0, 2.5], &[1.0, 4.0], None) {
         let (cloud, log) = scanner.scan_raw(&world, &[], &t, 3, 1);
         let per_plane = assert_on_planes(&cloud, &t, &name);
         // Half a revolution of a double-sided mirror turns the reflected plane all round.
