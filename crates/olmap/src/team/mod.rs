@@ -4,9 +4,11 @@
 
 mod clearing;
 mod mutual;
+mod store;
 
 pub use clearing::{clear_robots, ClearingParams};
 pub use mutual::{
     expected_position_error, mutual_from_scans, mutual_pose, separations, MutualFix,
     MutualObservation, MutualParams, MutualReject,
 };
+pub use store::{ScanStore, StoredScan, StoredSighting, STORE_MAGIC, STORE_VERSION};
