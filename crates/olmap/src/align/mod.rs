@@ -9,7 +9,7 @@ mod search;
 mod significance;
 mod target;
 
-pub use params::{Dof, Region, SearchParams};
+pub use params::{Dof, Locus, Region, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds,

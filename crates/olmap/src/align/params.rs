@@ -41,6 +41,101 @@ pub enum Region {
         /// Half-range of heading, radians.
         yaw: f64,
     },
+    /// A one-parameter family of poses (thesis §6.3.3, (6.2)-(6.3)): a sighting between
+    /// robots fixes a pose up to one parameter `t`, and only poses near the locus are
+    /// searched. See [`Locus`].
+    Locus(Locus),
+}
+
+/// A pose locus `t -> (c_x + r cos(t + phase), c_y + r sin(t + phase), z, yaw = t)`, `t` in
+/// `[0, 2π)`: the poses a sighting allows (thesis (6.2)-(6.3)).
+///
+/// * Another robot saw this one's beacon at `B` (map frame), mounted at `o` in this robot's
+///   frame: the robot's position is `B - R(t) o`, any heading: `center = B - (0, 0, o_z)`,
+///   `radius = |o_xy|`, `phase = atan2(o_y, o_x) + π` ((6.2); `radius = 0` for a beacon
+///   above the robot's origin).
+/// * This robot saw another's beacon `B` (map frame) at `b` in its own frame: its position
+///   is `B - R(t) b`: `center = B - (0, 0, b_z)`, `radius = |b_xy|`,
+///   `phase = atan2(b_y, b_x) + π` ((6.3), the circle locus with coupled heading).
+///
+/// The height is the locus's (beacons at a known height on a flat floor), roll and pitch
+/// stay at the prior's (gravity); refinement may adjust all three. The search samples `t` at the coarsest
+/// level's angular step and lets the pyramid refine around the locus; `slack` widens the
+/// start by whole coarse cells when it exceeds half a cell.
+///
+/// ```
+/// use olmap::align::Locus;
+/// // Seen by a robot that put our beacon (0.85 m above our origin) at (3, 1, 0.85):
+/// let l = Locus::seen_at([3.0, 1.0, 0.85], [0.0, 0.0, 0.85]);
+/// assert_eq!((l.center, l.radius), ([3.0, 1.0, 0.0], 0.0));
+/// let p = l.pose_at(1.0);
+/// assert!((p.translation().x - 3.0).abs() < 1e-12 && (p.yaw_pitch_roll().0 - 1.0).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Locus {
+    /// The circle's centre (and the poses' height), map frame, metres.
+    pub center: [f64; 3],
+    /// The circle's radius, metres (0: a fixed position, heading free).
+    pub radius: f64,
+    /// Angle of the position on the circle at `t = 0`, radians.
+    pub phase: f64,
+    /// How far the true pose may lie from the locus, metres (sighting noise; default
+    /// from the constructors 0.1 m).
+    pub slack: f64,
+}
+
+impl Locus {
+    /// (6.2): another robot saw this robot's beacon at `beacon` (map frame); the beacon
+    /// sits at `mount` in this robot's frame.
+    pub fn seen_at(beacon: [f64; 3], mount: [f64; 3]) -> Self {
+        Self::from_offset(beacon, mount)
+    }
+
+    /// (6.3): this robot saw another's beacon, known at `beacon` (map frame), at
+    /// `observed` in its own frame.
+    pub fn saw_at(beacon: [f64; 3], observed: [f64; 3]) -> Self {
+        Self::from_offset(beacon, observed)
+    }
+
+    fn from_offset(beacon: [f64; 3], offset: [f64; 3]) -> Self {
+        Locus {
+            center: [beacon[0], beacon[1], beacon[2] - offset[2]],
+            radius: offset[0].hypot(offset[1]),
+            phase: offset[1].atan2(offset[0]) + std::f64::consts::PI,
+            slack: 0.1,
+        }
+    }
+
+    /// The pose at parameter `t` (roll and pitch zero).
+    pub fn pose_at(&self, t: f64) -> Pose {
+        let [cx, cy, z] = self.center;
+        let a = t + self.phase;
+        Pose::from_xyz_ypr(
+            cx + self.radius * a.cos(),
+            cy + self.radius * a.sin(),
+            z,
+            crate::geometry::wrap_angle(t),
+            0.0,
+            0.0,
+        )
+    }
+
+    /// Extra coarse cells searched on each side of the locus: the slack in cells, rounded
+    /// (a lattice cell and the pyramid's resampling already cover half a cell).
+    pub(crate) fn slack_cells(&self, cell: f64) -> u64 {
+        (self.slack / cell).round() as u64
+    }
+
+    /// How many samples of `t` the search starts from at a coarse cell `cell` and angular
+    /// step `dtheta`: fine enough in heading and along the circle.
+    pub(crate) fn samples(&self, cell: f64, dtheta: f64) -> usize {
+        let step = if self.radius > 0.0 {
+            dtheta.min(cell / self.radius)
+        } else {
+            dtheta
+        };
+        ((std::f64::consts::TAU / step).ceil() as usize).max(1)
+    }
 }
 
 /// Parameters of [`super::global_search`].
@@ -123,6 +218,10 @@ impl SearchParams {
                 count(2.0 * z, cell),
                 count(2.0 * yaw, dth),
             ),
+            Region::Locus(l) => {
+                let k = 2 * l.slack_cells(cell) + 1;
+                (k, k, 1, l.samples(cell, dth) as u64)
+            }
         };
         let nz = if matches!(self.dof, Dof::XyYaw) {
             1

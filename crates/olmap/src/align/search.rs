@@ -19,7 +19,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::dense::{DenseGrid, LevelLookup};
-use super::params::{Dof, Region, SearchParams};
+use super::params::{Dof, Locus, Region, SearchParams};
 use super::significance::significance;
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
@@ -183,6 +183,19 @@ fn check(params: &SearchParams) -> Result<()> {
             return bad("window half-widths must be >= 0");
         }
     }
+    if let Region::Locus(l) = params.region {
+        let values = [
+            l.center[0],
+            l.center[1],
+            l.center[2],
+            l.radius,
+            l.phase,
+            l.slack,
+        ];
+        if values.iter().any(|v| !v.is_finite()) || l.radius < 0.0 || l.slack < 0.0 {
+            return bad("a locus needs a finite centre and phase, radius >= 0 and slack >= 0");
+        }
+    }
     if let Dof::SixDof { max_tilt } = params.dof {
         if !(max_tilt.is_finite() && max_tilt >= 0.0) {
             return bad("max_tilt must be >= 0");
@@ -237,7 +250,8 @@ fn prepare<'a>(
         Dof::SixDof { max_tilt } => Some(max_tilt),
         _ => None,
     };
-    let search_z = !matches!(params.dof, Dof::XyYaw);
+    // A locus fixes the height (beacon height on a flat floor, thesis §6.3.3).
+    let search_z = !matches!(params.dof, Dof::XyYaw) && !matches!(params.region, Region::Locus(_));
     let (t0, angle0_yaw) = match params.region {
         Region::Global => (
             Vector3::new(
@@ -251,6 +265,9 @@ fn prepare<'a>(
             Vector3::new(pt.x - xy, pt.y - xy, if search_z { pt.z - z } else { pt.z }),
             yaw_p - yaw,
         ),
+        // The lattice is anchored at the locus's centre: a fixed position (6.2) is a
+        // lattice point at every level.
+        Region::Locus(l) => (Vector3::new(l.center[0], l.center[1], l.center[2]), 0.0),
     };
     let lattice = Lattice {
         t0,
@@ -277,6 +294,9 @@ fn prepare<'a>(
         map_cells: (e.x / res).max(1.0) * (e.y / res).max(1.0) * (e.z / res).max(1.0),
     })
 }
+
+/// The level a locus search starts at (cells 4x the finest).
+const LOCUS_START_LEVEL: usize = 2;
 
 /// A scored pose: ranking score `2 * hits - conflicts`, the hits, the pose.
 type Scored = (i64, u32, Cand);
@@ -454,7 +474,13 @@ pub fn global_search(
 ) -> Result<Alignment> {
     let start = Instant::now();
     let problem = prepare(source, target, params)?;
-    let top = target.pyramid.levels() - 1;
+    let top = match params.region {
+        // One parameter is cheap to sample finely: a locus search starts at the level of
+        // 4-cell voxels, where a pose's score already tells true from false (the coarsest
+        // levels blur a nearby robot's surroundings into a few cells).
+        Region::Locus(_) => (target.pyramid.levels() - 1).min(LOCUS_START_LEVEL),
+        _ => target.pyramid.levels() - 1,
+    };
     let mut cands = initial_candidates(&problem, params, &target.pyramid, top);
     let mut reports = Vec::new();
     for level in (0..=top).rev() {
@@ -530,6 +556,10 @@ fn initial_candidates(
         .stats()
         .bbox
         .map_or(Vector3::zeros(), |b| b.extent());
+    let ntilt = match params.dof {
+        Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
+        _ => 1,
+    };
     let (nx, ny, nz, nyaw) = match params.region {
         Region::Global => (
             count(ext.x, cell),
@@ -543,12 +573,9 @@ fn initial_candidates(
             count(2.0 * z, cell),
             count(2.0 * yaw, dth),
         ),
+        Region::Locus(locus) => return locus_candidates(l, &locus, level, ntilt),
     };
     let nz = if l.searched_t[2] { nz } else { 1 };
-    let ntilt = match params.dof {
-        Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
-        _ => 1,
-    };
     let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
     for a in 0..nyaw {
         for b in 0..ntilt {
@@ -566,6 +593,47 @@ fn initial_candidates(
             }
         }
     }
+    out
+}
+
+/// The start of a locus search at `level`: the lattice poses nearest to samples of the
+/// locus (every `t` step of the level's angular step, or finer along a wide circle), with
+/// `slack` cells around them in x, y and z, and every tilt index.
+fn locus_candidates(l: &Lattice, locus: &Locus, level: usize, ntilt: i32) -> Vec<Cand> {
+    let cell = l.cell(level);
+    let dth = l.dtheta(level);
+    let k = locus.slack_cells(cell) as i32;
+    let kz = if l.searched_t[2] { k } else { 0 };
+    let n = locus.samples(cell, dth);
+    let mut out = Vec::new();
+    for s in 0..n {
+        let t = s as f64 * std::f64::consts::TAU / n as f64;
+        let p = locus.pose_at(t).translation();
+        let index = |v: f64, o: f64| ((v - o) / cell).round() as i32;
+        let yaw = ((t - l.angle0[0]) / dth).round() as i32;
+        let (ix, iy) = (index(p.x, l.t0.x), index(p.y, l.t0.y));
+        let iz = if l.searched_t[2] {
+            index(p.z, l.t0.z)
+        } else {
+            0
+        };
+        for b in 0..ntilt {
+            for g in 0..ntilt {
+                for dx in -k..=k {
+                    for dy in -k..=k {
+                        for dz in -kz..=kz {
+                            out.push(Cand {
+                                r: [yaw, b, g],
+                                t: [ix + dx, iy + dy, iz + dz],
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
     out
 }
 
