@@ -3,6 +3,7 @@
 
 use std::time::Instant;
 
+use super::links::{Placement, ScanLink, TeamLinks};
 use crate::align::{register_to_split, Region, RegisterParams, Registration, SearchTarget};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -108,6 +109,8 @@ pub struct PlacedScan {
     pub inlier_fraction: Option<f64>,
     /// Whether its final search was global (no usable odometry window).
     pub global: bool,
+    /// What placed it: the frame, odometry, a global search or a sighting.
+    pub via: Placement,
 }
 
 /// A scan that could not be placed, and why.
@@ -177,9 +180,12 @@ pub struct MapBuild {
     pub seconds: f64,
 }
 
-/// A batch mapper's cached registration: the result, whether its search was global, and
-/// the scan's footprint in the map at the result.
-type CacheEntry = (Registration, bool, Option<Aabb>);
+/// A batch mapper's cached registration: the result, what found it, and the scan's
+/// footprint in the map at the result.
+type CacheEntry = (Registration, Placement, Option<Aabb>);
+
+/// Linked scans whose links are searched per scan and attempt (the strongest first).
+const MAX_LINK_SEARCHES: usize = 2;
 
 /// How many stale scans the batch mapper retries before looking for a trusted result.
 const RETRY_GROUP: usize = 4;
@@ -190,6 +196,7 @@ struct State<'a> {
     /// [`MapParams::register_band`] when set.
     clouds: Vec<std::borrow::Cow<'a, PointCloud>>,
     params: &'a MapParams,
+    team: &'a TeamLinks,
     target: SearchTarget,
     refine_map: PointCloud,
     poses: Vec<Option<Pose>>,
@@ -216,6 +223,7 @@ impl State<'_> {
             .iter()
             .enumerate()
             .filter_map(|(i, p)| p.map(|p| (i, p)))
+            .filter(|(i, _)| self.team.frame[*i] == self.team.frame[s])
             .filter(|(i, _)| self.scans[*i].odometry.is_some())
             .min_by(|(i, _), (j, _)| {
                 let d = |k: usize| {
@@ -229,13 +237,48 @@ impl State<'_> {
         Some((pose_p * motion, motion.translation().norm()))
     }
 
-    /// Registers scan `s` against the map. With an odometry prediction: in windows around
-    /// it that double twice, then one as wide as the odometry tolerance; a global search
-    /// only when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
-    /// Without odometry: globally. Returns the best registration and whether it was global.
-    fn register(&mut self, s: usize, allow_global: bool) -> Result<(Registration, bool)> {
+    /// Registers scan `s` against the map. First along the loci of its sightings of or by
+    /// placed scans (mutual first). Then, with an odometry prediction: in windows around it
+    /// that double twice, then one as wide as the odometry tolerance; a global search only
+    /// when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
+    /// Without odometry: globally. Returns the best registration and what found it.
+    fn register(&mut self, s: usize, allow_global: bool) -> Result<(Registration, Placement)> {
+        let mut best: Option<(Registration, Placement)> = None;
+        let keep = |best: &mut Option<(Registration, Placement)>, r: Registration, via| {
+            if best
+                .as_ref()
+                .is_none_or(|b| r.search.overlap > b.0.search.overlap)
+            {
+                *best = Some((r, via));
+            }
+        };
+        let mut links: Vec<ScanLink> = self.team.links[s]
+            .iter()
+            .filter(|l| self.poses[l.other()].is_some())
+            .cloned()
+            .collect();
+        // The strongest link per linked scan (a mutual one subsumes the two loci).
+        links.sort_by_key(|l| (l.other(), l.rank()));
+        links.dedup_by_key(|l| l.other());
+        links.sort_by_key(|l| (l.rank(), l.other()));
+        for link in links.iter().take(MAX_LINK_SEARCHES) {
+            let other_pose = self.poses[link.other()].expect("filtered");
+            let (region, prior) = link.region(&other_pose, self.team);
+            let mut params = self.params.register.clone();
+            params.search.region = region;
+            params.search.prior = prior;
+            let mut r = self.run(s, &params)?;
+            check_link(&mut r, &region, &prior, self.team.locus_slack);
+            let via = Placement::Sighting {
+                equation: link.equation(),
+                other: link.other(),
+            };
+            if r.trusted {
+                return Ok((r, via));
+            }
+            keep(&mut best, r, via);
+        }
         let mut params = self.params.register.clone();
-        let mut best: Option<Registration> = None;
         let prediction = self.predict(s);
         if let Some((prior, distance)) = prediction {
             let (xy, z, yaw) = self.params.odometry_window;
@@ -254,18 +297,16 @@ impl State<'_> {
                 let mut r = self.run(s, &params)?;
                 check_odometry(&mut r, &prior, tolerance);
                 if r.trusted {
-                    return Ok((r, false));
+                    return Ok((r, Placement::Odometry));
                 }
-                if best
-                    .as_ref()
-                    .is_none_or(|b| r.search.overlap > b.search.overlap)
-                {
-                    best = Some(r);
-                }
+                keep(&mut best, r, Placement::Odometry);
             }
             if !allow_global {
-                return Ok((best.expect("at least one window"), false));
+                return Ok(best.expect("at least one window"));
             }
+        } else if !allow_global && !links.is_empty() {
+            // Linked but no odometry in its frame yet: the loci were the search.
+            return Ok(best.expect("at least one link"));
         }
         params.search.region = Region::Global;
         let mut r = self.run(s, &params)?;
@@ -273,16 +314,16 @@ impl State<'_> {
             check_odometry(&mut r, &prior, self.odometry_tolerance(distance));
         }
         match best {
-            Some(b) if !r.trusted && b.search.overlap > r.search.overlap => Ok((b, false)),
-            _ => Ok((r, true)),
+            Some(b) if !r.trusted && b.0.search.overlap > r.search.overlap => Ok(b),
+            _ => Ok((r, Placement::Global)),
         }
     }
 
     /// [`State::register`] with the scan's footprint at the result: a batch cache entry.
     fn attempt(&mut self, s: usize, allow_global: bool) -> Result<CacheEntry> {
-        let (r, global) = self.register(s, allow_global)?;
+        let (r, via) = self.register(s, allow_global)?;
         let fp = footprint(&self.clouds[s], &r.pose);
-        Ok((r, global, fp))
+        Ok((r, via, fp))
     }
 
     /// Registers scan `s` in a window (the first odometry window) around `prior`: the
@@ -292,7 +333,11 @@ impl State<'_> {
         let (xy, z, yaw) = self.params.odometry_window;
         params.search.prior = prior;
         params.search.region = Region::Window { xy, z, yaw };
-        self.run(s, &params)
+        let mut r = self.run(s, &params)?;
+        if let Some((predicted, distance)) = self.predict(s) {
+            check_odometry(&mut r, &predicted, self.odometry_tolerance(distance));
+        }
+        Ok(r)
     }
 
     /// One registration of scan `s` against the map (searching with its registration
@@ -349,6 +394,9 @@ impl State<'_> {
     /// footprint, widened by every window and tolerance, misses the map's box): no search
     /// can succeed yet, so the batch mapper does not spend one.
     fn far_from_map(&self, s: usize) -> bool {
+        if self.unlinked(s) {
+            return true;
+        }
         let (Some((prior, distance)), Some(map)) = (self.predict(s), self.map_box) else {
             return false;
         };
@@ -361,6 +409,19 @@ impl State<'_> {
             fp.max + nalgebra::Vector3::repeat(margin),
         );
         !overlaps(&widened, &map)
+    }
+
+    /// Whether scan `s` waits for a link ([`TeamLinks::hold_unlinked`]): no scan of its
+    /// robot is placed and none of its links leads to a placed scan. Such a scan is never
+    /// searched: a robot joins the map through a sighting only (a global match of a whole
+    /// robot in a symmetric building can be a mirror image).
+    fn unlinked(&self, s: usize) -> bool {
+        self.team.hold_unlinked
+            && !(0..self.scans.len())
+                .any(|i| self.poses[i].is_some() && self.team.frame[i] == self.team.frame[s])
+            && !self.team.links[s]
+                .iter()
+                .any(|l| self.poses[l.other()].is_some())
     }
 
     fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
@@ -392,12 +453,34 @@ fn check_odometry(r: &mut Registration, prior: &Pose, tolerance: f64) {
     }
 }
 
+/// Distrusts a registration that a link's search let drift away from the link: more than
+/// twice the slack plus 0.1 m from its locus (at the found heading), or out of a mutual
+/// link's window (the pyramid's resampling can walk a pose a coarse cell past the start,
+/// e.g. along a row of identical desks).
+fn check_link(r: &mut Registration, region: &Region, prior: &Pose, slack: f64) {
+    let p = r.pose.translation();
+    let (off, limit) = match region {
+        Region::Locus(l) => {
+            let on = l.pose_at(r.pose.yaw_pitch_roll().0).translation();
+            ((p.xy() - on.xy()).norm(), 2.0 * slack + 0.1)
+        }
+        Region::Window { xy, .. } => ((p.xy() - prior.translation().xy()).norm(), *xy),
+        Region::Global => return,
+    };
+    if r.trusted && off > limit {
+        r.trusted = false;
+        r.doubts.push(format!(
+            "the match is {off:.2} m from the sighting's constraint (limit {limit:.2} m)"
+        ));
+    }
+}
+
 fn placed_record(
     index: usize,
     name: &str,
     order: usize,
     r: &Registration,
-    global: bool,
+    via: Placement,
 ) -> PlacedScan {
     PlacedScan {
         index,
@@ -407,7 +490,8 @@ fn placed_record(
         overlap_fraction: r.search.overlap_fraction,
         significance: r.search.significance,
         inlier_fraction: r.refinement.as_ref().map(|f| f.inlier_fraction),
-        global,
+        global: via == Placement::Global,
+        via,
     }
 }
 
@@ -417,11 +501,41 @@ fn placed_record(
 pub fn build_map(
     scans: &[ScanInput],
     params: &MapParams,
+    progress: impl FnMut(usize, usize),
+) -> Result<MapBuild> {
+    build_map_linked(scans, params, &TeamLinks::none(scans.len()), progress)
+}
+
+/// [`build_map`] for a team: scans taken by several robots (each with its own odometry
+/// frame, `team.frame`) and linked by sightings (`team.links`, thesis (6.2)-(6.4)). A scan
+/// with a link to a placed scan is searched along the link's locus first (a mutual link:
+/// a small window around the pose it gives), which is faster than a global search and
+/// cannot match elsewhere; odometry windows (within its robot's frame) and global
+/// searches follow as in [`build_map`]. [`PlacedScan::via`] records what placed each scan.
+pub fn build_map_linked(
+    scans: &[ScanInput],
+    params: &MapParams,
+    team: &TeamLinks,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<MapBuild> {
     let start = Instant::now();
     if scans.is_empty() {
         return Err(Error::InvalidArgument("no scans to map".into()));
+    }
+    if team.frame.len() != scans.len()
+        || team.links.len() != scans.len()
+        || team
+            .links
+            .iter()
+            .flatten()
+            .any(|l| l.other() >= scans.len())
+    {
+        return Err(Error::InvalidArgument(format!(
+            "the team links describe {} / {} scans (or link past them), not {}",
+            team.frame.len(),
+            team.links.len(),
+            scans.len()
+        )));
     }
     if params.first >= scans.len() {
         return Err(Error::InvalidArgument(format!(
@@ -453,6 +567,7 @@ pub fn build_map(
         scans,
         clouds,
         params,
+        team,
         target: SearchTarget::from_scans(&[], res, levels)?,
         refine_map: PointCloud::new(),
         poses: vec![None; scans.len()],
@@ -469,16 +584,17 @@ pub fn build_map(
         significance: f64::INFINITY,
         inlier_fraction: None,
         global: false,
+        via: Placement::Frame,
     }];
     progress(1, scans.len());
     let mut last_doubts: Vec<Option<Vec<String>>> = vec![None; scans.len()];
     match params.mode {
         MapMode::Sequential => {
             for s in (0..scans.len()).filter(|&s| s != params.first) {
-                let (r, global) = state.register(s, true)?;
+                let (r, via) = state.register(s, true)?;
                 if r.trusted {
                     state.place(s, r.pose)?;
-                    placed.push(placed_record(s, &scans[s].name, placed.len(), &r, global));
+                    placed.push(placed_record(s, &scans[s].name, placed.len(), &r, via));
                 } else {
                     last_doubts[s] = Some(r.doubts.clone());
                 }
@@ -575,7 +691,7 @@ pub fn build_map(
                     let last_resort: Vec<usize> = unplaced
                         .iter()
                         .copied()
-                        .filter(|&s| far[s] && !forced[s])
+                        .filter(|&s| far[s] && !forced[s] && !state.unlinked(s))
                         .collect();
                     for s in last_resort {
                         forced[s] = true;
@@ -590,23 +706,32 @@ pub fn build_map(
                     }
                     break;
                 };
-                let (r, global, fp) = cache[s].take().expect("chosen from the cache");
-                let (r, global, fp) = if provisional[s] {
+                let (r, via, fp) = cache[s].take().expect("chosen from the cache");
+                let (r, via, fp) = if provisional[s] {
                     provisional[s] = false;
                     let confirmed = state.register_near(s, r.pose)?;
                     if !confirmed.trusted {
                         let fpc = footprint(&state.clouds[s], &confirmed.pose);
-                        cache[s] = Some((confirmed, global, fpc));
+                        cache[s] = Some((confirmed, via, fpc));
                         continue;
                     }
                     let fpc = footprint(&state.clouds[s], &confirmed.pose);
-                    (confirmed, global, fpc)
+                    (confirmed, via, fpc)
                 } else {
-                    (r, global, fp)
+                    (r, via, fp)
                 };
                 state.place(s, r.pose)?;
-                placed.push(placed_record(s, &scans[s].name, placed.len(), &r, global));
+                placed.push(placed_record(s, &scans[s].name, placed.len(), &r, via));
                 progress(placed.len(), scans.len());
+                // Scans linked to this one and not yet trusted search along their new loci
+                // next round.
+                for &u in &unplaced {
+                    let trusted = cache[u].as_ref().is_some_and(|c| c.0.trusted);
+                    if u != s && !trusted && team.links[u].iter().any(|l| l.other() == s) {
+                        cache[u] = None;
+                        provisional[u] = false;
+                    }
+                }
                 // Trusted results whose map region changed get their score refreshed at
                 // their pose (cheap) and are confirmed before joining; untrusted ones are
                 // retried only when nothing trusted is left.

@@ -150,3 +150,53 @@ pub fn evaluate(estimate: &PoseList, reference: &PoseList) -> Result<Evaluation>
         summary,
     })
 }
+
+/// One bar of an error histogram: the count of errors in `[from, to)` metres (the last
+/// bar, `to = ∞`, holds everything beyond the range).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HistogramBin {
+    /// Lower edge, metres.
+    pub from: f64,
+    /// Upper edge, metres (`f64::INFINITY` for the overflow bar).
+    pub to: f64,
+    /// Errors in the bar.
+    pub count: usize,
+}
+
+/// The distribution of position errors as the thesis plots it (Figure 6.11): bars `bin`
+/// metres wide from 0 to `max`, and one overflow bar beyond.
+///
+/// ```
+/// use olmap::mapping::position_histogram;
+/// let bars = position_histogram(&[0.02, 0.04, 0.15, 2.5], 0.1, 1.0);
+/// assert_eq!(bars.len(), 11);
+/// assert_eq!((bars[0].count, bars[1].count, bars[10].count), (2, 1, 1));
+/// ```
+pub fn position_histogram(errors_m: &[f64], bin: f64, max: f64) -> Vec<HistogramBin> {
+    let bins = if bin > 0.0 && max > 0.0 {
+        (max / bin).ceil() as usize
+    } else {
+        0
+    };
+    let mut out: Vec<HistogramBin> = (0..bins)
+        .map(|k| HistogramBin {
+            from: k as f64 * bin,
+            to: ((k + 1) as f64 * bin).min(max),
+            count: 0,
+        })
+        .collect();
+    out.push(HistogramBin {
+        from: if bins > 0 { max } else { 0.0 },
+        to: f64::INFINITY,
+        count: 0,
+    });
+    for &e in errors_m {
+        let k = if bins > 0 && e < max {
+            ((e / bin).floor().max(0.0) as usize).min(bins - 1)
+        } else {
+            bins
+        };
+        out[k].count += 1;
+    }
+    out
+}

@@ -3,11 +3,14 @@
 
 mod builder;
 mod eval;
+mod links;
 
 pub use builder::{
-    build_map, fuse_scan_maps, MapBuild, MapMode, MapParams, PlacedScan, RejectedScan, ScanInput,
-    ScanMap,
+    build_map, build_map_linked, fuse_scan_maps, MapBuild, MapMode, MapParams, PlacedScan,
+    RejectedScan, ScanInput, ScanMap,
 };
 pub use eval::{
-    evaluate, ErrorSummary, Evaluation, ScanError, EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
+    evaluate, position_histogram, ErrorSummary, Evaluation, HistogramBin, ScanError,
+    EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
 };
+pub use links::{Placement, ScanLink, TeamLinks};
