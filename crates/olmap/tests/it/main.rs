@@ -15,6 +15,7 @@ mod scanner;
 mod sim_robots;
 mod sim_scanners;
 mod sim_world;
+mod team;
 mod team_store;
 
 use std::path::PathBuf;
