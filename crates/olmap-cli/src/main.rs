@@ -62,6 +62,9 @@ enum Command {
     /// Find circular beacons of known radius in a 2D laser scan (CSV or JSON): least
     /// squares, range-weighted Hough transform or retroreflective runs.
     Beacons(commands::beacons::BeaconsArgs),
+    /// Map a multi-robot dataset as a team: sightings confine the scan searches (thesis
+    /// (6.2)-(6.4)), seen robots are cleared; optionally compare with every robot alone.
+    Team(commands::team::TeamArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
     /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
@@ -82,6 +85,7 @@ fn main() -> ExitCode {
         Command::Merge(a) => commands::map::merge(&a),
         Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
+        Command::Team(a) => commands::team::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Grid2d(a) => commands::grid2d::run(&a),
         Command::Beacons(a) => commands::beacons::run(&a),

@@ -115,7 +115,7 @@ fn convert_refuses_bad_arguments_without_writing() {
 }
 
 #[test]
-fn demo_simulates_a_team_and_maps_each_robot() {
+fn demo_maps_a_team_and_each_robot_alone() {
     let dir = tempfile::tempdir().unwrap();
     let run = || {
         json(&olmap(&[
@@ -125,37 +125,102 @@ fn demo_simulates_a_team_and_maps_each_robot() {
             "2",
             "--scans-per-robot",
             "3",
+            "--seed",
+            "2",
             "--out",
             dir.path().to_str().unwrap(),
         ]))
     };
     let v = run();
-    let robots = v["robots"].as_array().unwrap();
-    assert_eq!(robots.len(), 2);
-    for r in robots {
-        // Maps reload; every placed scan is where the simulation put it (the alignment
-        // issue's tolerance at 0.1 m: a voxel and a degree).
-        let map = olmap::occupancy::read_map(r["map"].as_str().unwrap())
+    // The joint map reloads with the reported voxels; the report on disk is the one printed
+    // (less the demo's extra fields).
+    let map = olmap::occupancy::read_map(dir.path().join("team.olm"))
+        .unwrap()
+        .map;
+    assert_eq!(map.len() as u64, v["voxels"].as_u64().unwrap());
+    let on_disk: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(on_disk["placements"], v["placements"]);
+    // Seed 2: the robots see each other, so robot1 joins robot0's map by a sighting, and
+    // every scan is within the 0.3 m of the truth.
+    let frames = v["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 2);
+    assert!(
+        frames[1]["linked_by"]
+            .as_str()
             .unwrap()
-            .map;
-        assert_eq!(map.len() as u64, r["voxels"].as_u64().unwrap());
-        assert!(r["placed"].as_u64().unwrap() >= 1);
-        assert!(
-            r["translation_error_m"]["max"].as_f64().unwrap() < 0.1,
-            "{r}"
-        );
-        assert!(
-            r["rotation_error_deg"]["max"].as_f64().unwrap() < 1.0,
-            "{r}"
-        );
-    }
+            .starts_with("sighting"),
+        "{v}"
+    );
+    let team = &v["evaluation"]["team"];
+    assert_eq!(team["placed"].as_u64(), Some(6), "{v}");
+    assert!(team["max_m"].as_f64().unwrap() < 0.3, "{team}");
+    let bars = team["histogram"].as_array().unwrap();
+    let counted: u64 = bars.iter().map(|b| b["count"].as_u64().unwrap()).sum();
+    assert_eq!(counted, team["compared"].as_u64().unwrap());
+    assert!(v["evaluation"]["solo"]["compared"].as_u64().unwrap() >= 2);
+    assert!(v["relative_frames"].as_array().unwrap().len() == 1);
     let back = olmap::io::sim_dataset::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
     assert_eq!(back.manifest.robots.len(), 2);
     // A second run replaces its own dataset and gives the same poses.
     let again = run();
-    for (a, b) in again["robots"].as_array().unwrap().iter().zip(robots) {
-        assert_eq!(a["translation_error_m"], b["translation_error_m"]);
+    assert_eq!(again["placements"], v["placements"]);
+}
+
+#[test]
+fn team_maps_a_simulated_dataset_and_refuses_a_missing_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let out = dir.path().join("out");
+    let sim = olmap(&[
+        "simulate",
+        "--robots",
+        "2",
+        "--scans-per-robot",
+        "3",
+        "--seed",
+        "2",
+        "--output",
+        data.to_str().unwrap(),
+    ]);
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let v = json(&olmap(&[
+        "team",
+        data.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    for f in [
+        "team.olm",
+        "team.ply",
+        "team.bt",
+        "team_poses.txt",
+        "team.store",
+        "report.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
     }
+    // The store file holds every scan; the pose file every placed one.
+    let store = olmap::team::ScanStore::read(out.join("team.store")).unwrap();
+    assert_eq!(store.len(), 6);
+    let poses = olmap::geometry::PoseList::read_path(out.join("team_poses.txt")).unwrap();
+    assert_eq!(poses.len(), v["placements"].as_array().unwrap().len());
+    assert!(v["evaluation"]["solo"].is_null());
+    let missing = dir.path().join("nowhere");
+    let r = olmap(&[
+        "team",
+        missing.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("nowhere"), "{err}");
 }
 
 #[test]

@@ -12,4 +12,5 @@ pub mod mutual;
 pub mod poses;
 pub mod scanner;
 pub mod simulate;
+pub mod team;
 pub mod voxelize;
