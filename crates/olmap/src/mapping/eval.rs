@@ -180,8 +180,9 @@ pub fn position_histogram(errors_m: &[f64], bin: f64, max: f64) -> Vec<Histogram
     };
     let mut out: Vec<HistogramBin> = (0..bins)
         .map(|k| HistogramBin {
-            from: k as f64 * bin,
-            to: ((k + 1) as f64 * bin).min(max),
+            // Rounded to nanometres: 0.3, not 0.30000000000000004, in reports.
+            from: round_nm(k as f64 * bin),
+            to: round_nm(((k + 1) as f64 * bin).min(max)),
             count: 0,
         })
         .collect();
@@ -199,4 +200,8 @@ pub fn position_histogram(errors_m: &[f64], bin: f64, max: f64) -> Vec<Histogram
         out[k].count += 1;
     }
     out
+}
+
+fn round_nm(v: f64) -> f64 {
+    (v * 1e9).round() / 1e9
 }
