@@ -11,7 +11,7 @@ use clap::Args;
 use olmap::geometry::{Pose, PoseList};
 use olmap::io::sim_dataset::read_dataset;
 use olmap::io::{self, WriteOptions};
-use olmap::mapping::{evaluate, position_histogram, Evaluation, Placement};
+use olmap::mapping::{evaluate, mean_median_max, position_histogram, Evaluation, Placement};
 use olmap::occupancy;
 use olmap::team::{map_solo, map_team, scan_name, ScanStore, TeamMap, TeamParams};
 use serde_json::{json, Value};
@@ -83,21 +83,20 @@ fn errors_m(e: &Evaluation) -> Vec<f64> {
 }
 
 fn summary_json(errors: &[f64], placed: usize, scans: usize) -> Value {
-    let mut v = errors.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len().max(1) as f64;
-    let share = |th: f64| v.iter().filter(|e| **e > th).count() as f64 / n;
+    let n = errors.len().max(1) as f64;
+    let share = |th: f64| errors.iter().filter(|e| **e > th).count() as f64 / n;
+    let [mean, median, max] = mean_median_max(errors.to_vec());
     json!({
         "scans": scans,
         "placed": placed,
-        "compared": v.len(),
-        "mean_m": v.iter().sum::<f64>() / n,
-        "median_m": v.get(v.len() / 2).copied().unwrap_or(0.0),
-        "max_m": v.last().copied().unwrap_or(0.0),
+        "compared": errors.len(),
+        "mean_m": mean,
+        "median_m": median,
+        "max_m": max,
         "share_above_0.3_m": share(0.3),
         "share_above_1_m": share(1.0),
         // Figure 6.11: bars of 0.1 m to 2 m, then everything beyond.
-        "histogram": position_histogram(&v, 0.1, 2.0)
+        "histogram": position_histogram(errors, 0.1, 2.0)
             .iter()
             .map(|b| json!({"from_m": b.from, "to_m": if b.to.is_finite() { json!(b.to) } else { json!(null) }, "count": b.count}))
             .collect::<Vec<_>>(),
@@ -144,10 +143,11 @@ pub fn run_pipeline(
     let team = map_team(store, params, |done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
     write_maps(out, "team", &team.build.map)?;
-    team.poses().write_path(out.join("team_poses.txt"))?;
+    let team_poses = team.poses();
+    team_poses.write_path(out.join("team_poses.txt"))?;
     store.write(out.join("team.store"))?;
 
-    let team_eval = truth.map(|t| evaluate(&team.poses(), t)).transpose()?;
+    let team_eval = truth.map(|t| evaluate(&team_poses, t)).transpose()?;
     let mut solo_runs: Vec<(u32, TeamMap, Option<Evaluation>)> = Vec::new();
     if solo {
         let bar = progress(total, "solo maps", quiet);
@@ -159,9 +159,9 @@ pub fn run_pipeline(
         for (r, m) in runs {
             let name = store.robot_name(r);
             occupancy::write_map(dir.join(format!("{name}.olm")), &m.build.map)?;
-            m.poses()
-                .write_path(dir.join(format!("{name}_poses.txt")))?;
-            let e = truth.map(|t| evaluate(&m.poses(), t)).transpose()?;
+            let poses = m.poses();
+            poses.write_path(dir.join(format!("{name}_poses.txt")))?;
+            let e = truth.map(|t| evaluate(&poses, t)).transpose()?;
             solo_runs.push((r, m, e));
         }
     }

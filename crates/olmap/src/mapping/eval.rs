@@ -56,7 +56,13 @@ fn trailing_number(name: &str) -> Option<u64> {
     digits.chars().rev().collect::<String>().parse().ok()
 }
 
-fn stats(mut v: Vec<f64>) -> [f64; 3] {
+/// Mean, median (the middle value, or the mean of the two middle ones) and largest of
+/// `v`; zeros when empty.
+///
+/// ```
+/// assert_eq!(olmap::mapping::mean_median_max(vec![3.0, 1.0, 2.0, 6.0]), [3.0, 2.5, 6.0]);
+/// ```
+pub fn mean_median_max(mut v: Vec<f64>) -> [f64; 3] {
     if v.is_empty() {
         return [0.0; 3];
     }
@@ -132,8 +138,8 @@ pub fn evaluate(estimate: &PoseList, reference: &PoseList) -> Result<Evaluation>
     };
     let summary = ErrorSummary {
         scans: scans.len(),
-        translation_m: stats(t.clone()),
-        rotation_deg: stats(r.clone()),
+        translation_m: mean_median_max(t.clone()),
+        rotation_deg: mean_median_max(r.clone()),
         share_above_m: EVAL_THRESHOLDS_M
             .iter()
             .map(|&th| (th, share(&t, th)))

@@ -10,7 +10,7 @@ pub use builder::{
     RejectedScan, ScanInput, ScanMap,
 };
 pub use eval::{
-    evaluate, position_histogram, ErrorSummary, Evaluation, HistogramBin, ScanError,
-    EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
+    evaluate, mean_median_max, position_histogram, ErrorSummary, Evaluation, HistogramBin,
+    ScanError, EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
 };
 pub use links::{Placement, ScanLink, TeamLinks};
