@@ -12,7 +12,7 @@ mod target;
 pub use params::{Dof, Locus, Region, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
-    TrustThresholds,
+    TrustThresholds, REFINE_REACH_CELLS,
 };
 pub use search::{exhaustive_search, global_search, Alignment, Candidate, LevelReport};
 pub use significance::significance;

@@ -1,7 +1,9 @@
 //! Cooperative mapping (issue: team mapping): the locus search of sightings, the team
 //! mapper against each robot alone, robot clearing in the joint map.
 
-use olmap::align::{global_search, Locus, Region, SearchParams, SearchTarget};
+use olmap::align::{
+    global_search, register_to_split, Locus, Region, RegisterParams, SearchParams, SearchTarget,
+};
 use olmap::geometry::{PoseError, PoseList};
 use olmap::mapping::evaluate;
 use olmap::sim::{simulate, OdometryNoise, RobotModel, SimConfig, SimDataset, WorldKind};
@@ -94,10 +96,9 @@ fn locus_searches_find_the_sighted_robot_with_fewer_poses_than_the_global_search
 
 /// Acceptance on five simulated runs (lab, 3 robots x 5 stops, the thesis' degraded
 /// odometry of 0.5 m / 10°): pooled over the runs, the joint map's scans have a mean
-/// position error of at most 0.1 m, none is off by more than 1 m (a gross error) and at
-/// most 10 % by more than 0.3 m (the thesis: 0.1 m mean, no error > 0.3 m; one of these
-/// runs has 4 scans at 0.31-0.36 m, a robot joined with a 2° heading error); every robot in the joint map joined it through a sighting, never a global
-/// search; robots no sighting ties to the team are mapped alone, not forced in.
+/// position error of at most 0.1 m and none is off by more than 0.3 m (the thesis' team
+/// result, §6.5); every robot in the joint map joined it through a sighting, never a
+/// global search; robots no sighting ties to the team are mapped alone, not forced in.
 #[test]
 fn team_mapping_of_five_simulated_runs_is_accurate() {
     let (mut errors, mut in_map, mut total) = (Vec::new(), 0, 0);
@@ -126,22 +127,71 @@ fn team_mapping_of_five_simulated_runs_is_accurate() {
         }
     }
     let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-    let gross = errors.iter().filter(|e| **e > 0.3).count();
-    assert!(
-        mean <= 0.1,
-        "mean position error {mean:.3} m over {} scans",
-        errors.len()
-    );
-    assert!(
-        gross * 10 <= errors.len(),
-        "{gross} of {} scans off by more than 0.3 m",
-        errors.len()
-    );
     let worst = errors.iter().copied().fold(0.0, f64::max);
-    assert!(worst <= 1.0, "a gross error of {worst:.2} m");
+    assert!(
+        worst <= 0.3,
+        "a scan is {worst:.2} m off (mean {mean:.3} m over {} scans)",
+        errors.len()
+    );
     assert!(
         in_map * 2 >= total,
         "only {in_map} of {total} scans in the joint maps"
+    );
+}
+
+/// A robot joining the team map with little overlap (simulated lab, seed 4: robot 2's
+/// first scan against robot 0's five scans, 30 % of its voxels shared): the search in a
+/// window around the true pose finds it to a cell, and the ICP refinement that follows
+/// must keep it there. With ICP's first correspondence gate at 2 m (its default for
+/// unaided use), structure robot 0 never saw pulled the pose 0.21 m and 2.4° along a row
+/// of desks; [`olmap::align::REFINE_REACH_CELLS`] caps the gate after a search.
+#[test]
+fn refinement_after_a_low_overlap_search_stays_at_the_searched_optimum() {
+    let data = lab(4, 3, 5, OdometryNoise::none());
+    let frame = data.robots[0].truth[0].inverse();
+    let band = (0.1, 2.8);
+    let mut target = SearchTarget::from_scans(&[], 0.1, 6).unwrap();
+    let mut refine_map = olmap::cloud::PointCloud::new();
+    for (scan, truth) in data.robots[0].scans.iter().zip(&data.robots[0].truth) {
+        let pose = frame * *truth;
+        target
+            .add_scan(&scan.z_band(band.0, band.1), &pose)
+            .unwrap();
+        refine_map.extend_from(&scan.transformed(&pose));
+    }
+    let refine_map = refine_map.voxel_downsample(0.05).unwrap();
+    let scan = &data.robots[2].scans[0];
+    let truth = frame * data.robots[2].truth[0];
+    let mut params = RegisterParams::default();
+    params.search.prior = truth;
+    params.search.region = Region::Window {
+        xy: 0.5,
+        z: 0.3,
+        yaw: 10f64.to_radians(),
+    };
+    let r = register_to_split(
+        &scan.z_band(band.0, band.1),
+        scan,
+        &target,
+        &refine_map,
+        &params,
+    )
+    .unwrap();
+    assert!(
+        r.search.overlap_fraction < 0.4,
+        "overlap {:.2}: not the low-overlap case this test is about",
+        r.search.overlap_fraction
+    );
+    let searched = PoseError::between(&r.search.pose, &truth);
+    let e = PoseError::between(&r.pose, &truth);
+    assert!(r.refinement.as_ref().is_some_and(|f| f.converged));
+    assert!(
+        e.translation_m <= 0.1 && e.rotation_deg <= 1.0,
+        "searched {:.3} m / {:.2} deg, refined {:.3} m / {:.2} deg off",
+        searched.translation_m,
+        searched.rotation_deg,
+        e.translation_m,
+        e.rotation_deg
     );
 }
 
