@@ -57,8 +57,8 @@ pub struct MapParams {
     /// Voxel of the point map the refinement aligns to, metres (default 0.05).
     pub refine_map_voxel: f64,
     /// With odometry: a global result farther than this from the odometry prediction is
-    /// not trusted, metres: the larger of this and 25 % of the odometry distance from the
-    /// scan it was predicted from (default 2 m). Odometry is not trusted blindly, nor is a
+    /// not trusted, metres: the larger of this and 25 % of the odometry path length from
+    /// the scan it was predicted from (default 2 m). Odometry is not trusted blindly, nor is a
     /// global match that contradicts it by tens of metres (a repetitive building).
     pub odometry_tolerance: f64,
     /// Keep each placed scan's own ray-traced occupancy list, in its sensor frame, in
@@ -214,27 +214,50 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 }
 
 impl State<'_> {
-    /// The odometry prediction of scan `s` from the placed scan nearest to it by odometry
-    /// (the least drift in between), and the odometry distance between the two.
+    /// The odometry prediction of scan `s` from the placed scan of its frame fewest scans
+    /// away in the input (input order is capture order: odometry drifts with every move,
+    /// so the scan nearest in position may be many moves and tens of degrees of drift
+    /// away), and the odometry path length between the two.
     fn predict(&self, s: usize) -> Option<(Pose, f64)> {
         let odo_s = self.scans[s].odometry?;
-        let (p, pose_p) = self
-            .poses
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| p.map(|p| (i, p)))
-            .filter(|(i, _)| self.team.frame[*i] == self.team.frame[s])
-            .filter(|(i, _)| self.scans[*i].odometry.is_some())
-            .min_by(|(i, _), (j, _)| {
-                let d = |k: usize| {
-                    (self.scans[k].odometry.expect("filtered").translation() - odo_s.translation())
-                        .norm()
-                };
-                d(*i).total_cmp(&d(*j)).then(i.cmp(j))
-            })?;
+        let p = self.predicts_from(s)?;
+        let pose_p = self.poses[p].expect("placed");
         let odo_p = self.scans[p].odometry.expect("filtered");
         let motion = odo_p.inverse() * odo_s;
-        Some((pose_p * motion, motion.translation().norm()))
+        Some((pose_p * motion, self.path_length(p, s)))
+    }
+
+    /// The placed scan [`State::predict`] predicts scan `s` from.
+    fn predicts_from(&self, s: usize) -> Option<usize> {
+        self.scans[s].odometry?;
+        self.poses
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| p.is_some() && self.team.frame[*i] == self.team.frame[s])
+            .filter(|(i, _)| self.scans[*i].odometry.is_some())
+            .map(|(i, _)| i)
+            .min_by_key(|&i| (i.abs_diff(s), i))
+    }
+
+    /// The odometry path length between scans `a` and `b` of one frame: the moves between
+    /// the frame's scans with odometry, in input order.
+    fn path_length(&self, a: usize, b: usize) -> f64 {
+        let (lo, hi) = (a.min(b), a.max(b));
+        let frame = self.team.frame[a];
+        let mut last: Option<Pose> = None;
+        let mut length = 0.0;
+        for i in lo..=hi {
+            if self.team.frame[i] != frame {
+                continue;
+            }
+            if let Some(odo) = self.scans[i].odometry {
+                if let Some(prev) = last {
+                    length += (odo.translation() - prev.translation()).norm();
+                }
+                last = Some(odo);
+            }
+        }
+        length
     }
 
     /// Registers scan `s` against the map. First along the loci of its sightings of or by
@@ -732,6 +755,18 @@ pub fn build_map_linked(
                         provisional[u] = false;
                     }
                 }
+                // Scans of the same robot that now predict from this one (fewer moves, less
+                // drift) search again around the better prediction: a result found around a
+                // prediction many moves old can be a look-alike place metres away.
+                for &u in &unplaced {
+                    let by_odometry = cache[u]
+                        .as_ref()
+                        .is_some_and(|c| !matches!(c.1, Placement::Sighting { .. }));
+                    if u != s && by_odometry && state.predicts_from(u) == Some(s) {
+                        cache[u] = None;
+                        provisional[u] = false;
+                    }
+                }
                 // Trusted results whose map region changed get their score refreshed at
                 // their pose (cheap) and are confirmed before joining; untrusted ones are
                 // retried only when nothing trusted is left.
@@ -798,4 +833,50 @@ pub fn build_map_linked(
         registrations: state.registrations,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A robot drives a 5 m square and comes back near its start: the last scan is 0.5 m
+    /// from the first by odometry but four moves from it, one move from the fourth.
+    #[test]
+    fn odometry_predicts_from_the_fewest_moves_not_the_nearest_position() {
+        let corners = [(0.0, 0.0), (5.0, 0.0), (5.0, 5.0), (0.0, 5.0), (0.3, 0.4)];
+        let scans: Vec<ScanInput> = corners
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, y))| ScanInput {
+                name: format!("s{i}"),
+                cloud: PointCloud::new(),
+                odometry: Some(Pose::from_xyz_ypr(x, y, 0.0, 0.0, 0.0, 0.0)),
+            })
+            .collect();
+        let params = MapParams::default();
+        let team = TeamLinks::none(scans.len());
+        let mut state = State {
+            scans: &scans,
+            clouds: scans
+                .iter()
+                .map(|s| std::borrow::Cow::Borrowed(&s.cloud))
+                .collect(),
+            params: &params,
+            team: &team,
+            target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
+            refine_map: PointCloud::new(),
+            poses: vec![None; scans.len()],
+            registrations: 0,
+            map_box: None,
+        };
+        state.poses[0] = Some(Pose::identity());
+        state.poses[3] = Some(Pose::from_xyz_ypr(0.2, 5.1, 0.0, 0.0, 0.0, 0.0));
+        assert_eq!(state.predicts_from(4), Some(3));
+        let (predicted, path) = state.predict(4).unwrap();
+        // From scan 3's placed pose by the one move in between (5.0 m, 4.6 m of it in y).
+        assert!((predicted.translation() - nalgebra::Vector3::new(0.5, 0.5, 0.0)).norm() < 1e-9);
+        assert!((path - (0.3f64.hypot(4.6))).abs() < 1e-9);
+        // The path length counts every move between two scans, not their distance.
+        assert!((state.path_length(0, 4) - (5.0 + 5.0 + 5.0 + 0.3f64.hypot(4.6))).abs() < 1e-9);
+    }
 }
