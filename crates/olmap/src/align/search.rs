@@ -335,22 +335,60 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
             let base: Vec<[i64; 3]> = scan.iter().map(|c| key_of(&rot, c, l.t0, cell)).collect();
             ts.iter()
                 .map(|t| {
-                    let (dx, dy, dz) = (t[0] as i64, t[1] as i64, t[2] as i64);
-                    let (mut hits, mut conflicts) = (0u32, 0i64);
-                    for b in &base {
-                        let (x, y, z) = (b[0] + dx, b[1] + dy, b[2] + dz);
-                        if map.contains(x, y, z) {
-                            hits += 1;
-                        } else if free.is_some_and(|f| f.contains(x, y, z)) {
-                            conflicts += 1;
-                        }
-                    }
+                    let d = [t[0] as i64, t[1] as i64, t[2] as i64];
+                    // One loop per lookup kind: no dispatch per voxel.
+                    let (hits, conflicts) = match (map, free) {
+                        (LevelLookup::Dense(g), None) => count(
+                            &base,
+                            d,
+                            |x, y, z| g.contains(x, y, z),
+                            None::<fn(i64, i64, i64) -> bool>,
+                        ),
+                        (LevelLookup::Dense(g), Some(f)) => count(
+                            &base,
+                            d,
+                            |x, y, z| g.contains(x, y, z),
+                            Some(|x, y, z| f.contains(x, y, z)),
+                        ),
+                        (m, None) => count(
+                            &base,
+                            d,
+                            |x, y, z| m.contains(x, y, z),
+                            None::<fn(i64, i64, i64) -> bool>,
+                        ),
+                        (m, Some(f)) => count(
+                            &base,
+                            d,
+                            |x, y, z| m.contains(x, y, z),
+                            Some(|x, y, z| f.contains(x, y, z)),
+                        ),
+                    };
                     (2 * hits as i64 - conflicts, hits, Cand { r: *r, t: *t })
                 })
                 .collect()
         })
         .collect();
     scored.into_iter().flatten().collect()
+}
+
+/// Hits and conflicts of the keys moved by `d`.
+#[inline(always)]
+fn count(
+    base: &[[i64; 3]],
+    d: [i64; 3],
+    occupied: impl Fn(i64, i64, i64) -> bool,
+    free: Option<impl Fn(i64, i64, i64) -> bool>,
+) -> (u32, i64) {
+    let (mut hits, mut conflicts) = (0u32, 0i64);
+    for b in base {
+        let (x, y, z) = (b[0] + d[0], b[1] + d[1], b[2] + d[2]);
+        if occupied(x, y, z) {
+            hits += 1;
+        } else if let Some(f) = &free {
+            conflicts += f(x, y, z) as i64;
+        }
+    }
+    (hits, conflicts)
 }
 
 /// The cell of a scan voxel centre `c` rotated by `rot` and moved by `t0`: the one formula
