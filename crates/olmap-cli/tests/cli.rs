@@ -840,3 +840,54 @@ fn bench_quick_json_reports_every_measure() {
         assert!(num(&v["peak_memory_bytes"], "memory") > 0.0);
     }
 }
+
+#[test]
+fn align_with_the_exact_search_in_a_window() {
+    let Some(d) = data() else { return };
+    let s0 = d.join("3dtk_dat/scan000.3d");
+    let s1 = d.join("3dtk_dat/scan001.3d");
+    let (s0, s1) = (s0.to_str().unwrap(), s1.to_str().unwrap());
+    let multires = json(&olmap(&[
+        "align",
+        "--json",
+        "--3dtk-valid",
+        "--no-refine",
+        s1,
+        s0,
+    ]));
+    let t = &multires["translation"];
+    let yaw = multires["yaw_pitch_roll_deg"][0].as_f64().unwrap();
+    // A window of ±0.5 m, ±0.3 m, ±5° centred 0.2 m and 2° off the multi-resolution pose.
+    let guess = format!(
+        "{},{},{},{},0,0",
+        t[0].as_f64().unwrap() + 0.2,
+        t[1].as_f64().unwrap() - 0.1,
+        t[2].as_f64().unwrap(),
+        yaw + 2.0
+    );
+    let windowed = |mode: &str| {
+        json(&olmap(&[
+            "align",
+            "--json",
+            "--3dtk-valid",
+            "--search",
+            mode,
+            "--guess",
+            &guess,
+            "--window",
+            "0.5,0.3,5",
+            s1,
+            s0,
+        ]))
+    };
+    let (exact, fast) = (windowed("exact"), windowed("multires"));
+    assert_eq!(exact["search"]["exact"], true);
+    assert_eq!(fast["search"]["exact"], false);
+    // The optimum of the window's lattice scores at least as well as the heuristic's pose.
+    let score = |v: &serde_json::Value| v["search"]["score"].as_i64().unwrap();
+    assert!(score(&exact) >= score(&fast));
+    // After ICP, data README §1.6: scan001 is 1.568 m ahead of scan000 (5 cm, §1.7).
+    let tx = exact["T_target_source"][0][3].as_f64().unwrap();
+    assert!((tx - 1.568).abs() < 0.05, "{tx}");
+    assert_eq!(exact["trusted"], true);
+}
