@@ -69,6 +69,10 @@ enum Command {
     Demo(commands::demo::DemoArgs),
     /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
     Scanner(commands::scanner::ScannerArgs),
+    /// Run the standard benchmark set (shared data and simulator): insertion, overlap
+    /// evaluations, alignment and localisation in both search modes, map building, thread
+    /// scaling, peak memory.
+    Bench(commands::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -90,6 +94,7 @@ fn main() -> ExitCode {
         Command::Grid2d(a) => commands::grid2d::run(&a),
         Command::Beacons(a) => commands::beacons::run(&a),
         Command::Scanner(a) => commands::scanner::run(&a),
+        Command::Bench(a) => commands::bench::run(&a),
     };
     match result {
         Ok(code) => code,

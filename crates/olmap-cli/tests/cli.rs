@@ -790,3 +790,104 @@ fn scanner_convert_and_repeatability_of_a_simulated_raw_log() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("trigger"));
 }
+
+#[test]
+fn bench_quick_json_reports_every_measure() {
+    let v = json(&olmap(&["bench", "--quick", "--json", "--threads", "2"]));
+    let num = |x: &serde_json::Value, what: &str| {
+        x.as_f64()
+            .unwrap_or_else(|| panic!("{what} is a number: {x}"))
+    };
+    assert!(num(&v["insertion"]["points"], "points") > 0.0);
+    assert!(num(&v["insertion"]["points_per_second"], "insertion rate") > 0.0);
+    assert!(num(&v["overlap"]["poses_per_second"], "pose rate") > 0.0);
+    assert!(num(&v["overlap"]["voxel_lookups_per_second"], "lookup rate") > 0.0);
+    for section in ["alignment", "localisation", "modes"] {
+        let rows = v[section].as_array().expect("a list of runs");
+        assert!(!rows.is_empty(), "{section}");
+        for r in rows {
+            assert!(num(&r["seconds"], "seconds") > 0.0, "{section}: {r}");
+            assert!(num(&r["translation_error_m"], "error").is_finite(), "{r}");
+            assert!(num(&r["rotation_error_deg"], "error").is_finite(), "{r}");
+        }
+    }
+    // The simulated pair: within the finest search lattice (0.1 m, below 1 degree).
+    let pair = &v["alignment"][0];
+    assert!(num(&pair["translation_error_m"], "error") < 0.15, "{pair}");
+    assert!(num(&pair["rotation_error_deg"], "error") < 1.0, "{pair}");
+    // Both modes on the small problem: the exact search finds the exhaustive optimum, which
+    // the multi-resolution search cannot beat.
+    let score = |mode: &str| {
+        let r = v["modes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["mode"] == mode)
+            .unwrap_or_else(|| panic!("a {mode} run"));
+        r["score"].as_i64().unwrap()
+    };
+    assert_eq!(score("exact"), score("exhaustive"));
+    assert!(score("multires") <= score("exact"));
+    assert!(num(&v["exact_over_multires_time"], "ratio") > 0.0);
+    assert!(num(&v["mapping"]["seconds_per_scan"], "per scan") > 0.0);
+    let threads = v["threads"].as_array().unwrap();
+    assert_eq!(threads.first().unwrap()["threads"], 1);
+    assert_eq!(threads.last().unwrap()["threads"], 2);
+    for t in threads {
+        assert!(num(&t["seconds"], "seconds") > 0.0 && num(&t["speedup"], "speedup") > 0.0);
+    }
+    if cfg!(target_os = "linux") {
+        assert!(num(&v["peak_memory_bytes"], "memory") > 0.0);
+    }
+}
+
+#[test]
+fn align_with_the_exact_search_in_a_window() {
+    let Some(d) = data() else { return };
+    let s0 = d.join("3dtk_dat/scan000.3d");
+    let s1 = d.join("3dtk_dat/scan001.3d");
+    let (s0, s1) = (s0.to_str().unwrap(), s1.to_str().unwrap());
+    let multires = json(&olmap(&[
+        "align",
+        "--json",
+        "--3dtk-valid",
+        "--no-refine",
+        s1,
+        s0,
+    ]));
+    let t = &multires["translation"];
+    let yaw = multires["yaw_pitch_roll_deg"][0].as_f64().unwrap();
+    // A window of ±0.5 m, ±0.3 m, ±5° centred 0.2 m and 2° off the multi-resolution pose.
+    let guess = format!(
+        "{},{},{},{},0,0",
+        t[0].as_f64().unwrap() + 0.2,
+        t[1].as_f64().unwrap() - 0.1,
+        t[2].as_f64().unwrap(),
+        yaw + 2.0
+    );
+    let windowed = |mode: &str| {
+        json(&olmap(&[
+            "align",
+            "--json",
+            "--3dtk-valid",
+            "--search",
+            mode,
+            "--guess",
+            &guess,
+            "--window",
+            "0.5,0.3,5",
+            s1,
+            s0,
+        ]))
+    };
+    let (exact, fast) = (windowed("exact"), windowed("multires"));
+    assert_eq!(exact["search"]["exact"], true);
+    assert_eq!(fast["search"]["exact"], false);
+    // The optimum of the window's lattice scores at least as well as the heuristic's pose.
+    let score = |v: &serde_json::Value| v["search"]["score"].as_i64().unwrap();
+    assert!(score(&exact) >= score(&fast));
+    // After ICP, data README §1.6: scan001 is 1.568 m ahead of scan000 (5 cm, §1.7).
+    let tx = exact["T_target_source"][0][3].as_f64().unwrap();
+    assert!((tx - 1.568).abs() < 0.05, "{tx}");
+    assert_eq!(exact["trusted"], true);
+}

@@ -7,7 +7,7 @@ use std::sync::OnceLock;
 
 use divan::Bencher;
 use olmap::align::icp::{refine, IcpParams};
-use olmap::align::{self, Dof, RegisterParams, SearchParams};
+use olmap::align::{self, Dof, RegisterParams, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
 use olmap::geometry::{Pose, PoseError, PoseList};
 use olmap::io::{self, ReadOptions};
@@ -165,4 +165,55 @@ fn refine_all_threads(bencher: Bencher, name: &str) {
     prm.refine = None;
     let start = align::register(&p.1, &p.2, &prm).unwrap().pose;
     bencher.bench(|| refine(&p.1, &p.2, &start, &IcpParams::default()).unwrap());
+}
+
+fn thesis() -> &'static olmap::sim::LocalisationBenchmark {
+    static B: OnceLock<olmap::sim::LocalisationBenchmark> = OnceLock::new();
+    B.get_or_init(|| olmap::sim::thesis_localisation(7, 16).unwrap())
+}
+
+/// The thesis benchmark (§5.4; `sim::thesis_localisation`, 16 map scans: 187,730 voxels at
+/// 0.02 m over 210 m^2, whole map, every heading): the multi-resolution search, all threads.
+/// The exact search does not finish in minutes here (README).
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn thesis_localisation(bencher: Bencher) {
+    let b = thesis();
+    let p = RegisterParams {
+        search: b.params.clone(),
+        refine: None,
+        trust: Default::default(),
+    };
+    bencher.bench(|| align::localize(&b.scan, &b.map, &p).unwrap());
+}
+
+/// Both search modes and the exhaustive search on a small global problem (room scans at
+/// 0.3 m, every heading): the ratio of the modes where the exact search is practical.
+#[divan::bench(args = ["multires", "exact", "exhaustive"], sample_count = 10)]
+fn small_global(bencher: Bencher, mode: &str) {
+    let pts = olmap::fixtures::furnished_room(0.05);
+    let t_target = Pose::from_xyz_ypr(6.0, 4.5, 1.2, 0.4, 0.0, 0.0);
+    let motion = Pose::from_xyz_ypr(0.9, -0.4, 0.0, 2.0, 0.0, 0.0);
+    let target = olmap::fixtures::scan_of(&pts, &t_target, 4.0);
+    let source = olmap::fixtures::scan_of(&pts, &(t_target * motion), 4.0);
+    let params = SearchParams {
+        resolution: 0.3,
+        levels: 3,
+        dof: Dof::XyYaw,
+        max_scan_voxels: 300,
+        max_range: 4.0,
+        search: if mode == "exact" {
+            SearchMode::Exact
+        } else {
+            SearchMode::MultiResolution
+        },
+        ..Default::default()
+    };
+    let target = align::SearchTarget::from_cloud(&target, 0.3, 3).unwrap();
+    bencher.bench(|| {
+        if mode == "exhaustive" {
+            align::exhaustive_search(&source, &target, &params).unwrap()
+        } else {
+            align::global_search(&source, &target, &params).unwrap()
+        }
+    });
 }

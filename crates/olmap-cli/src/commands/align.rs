@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
-use olmap::align::{self, Dof, Region, RegisterParams, Registration, SearchParams};
+use olmap::align::{self, Dof, Region, RegisterParams, Registration, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
 use olmap::geometry::{Pose, PoseList};
 use olmap::io::{self, ReadOptions};
@@ -25,6 +25,15 @@ pub enum DofArg {
     /// All six; roll and pitch within --max-tilt of the guess.
     #[value(name = "6dof")]
     SixDof,
+}
+
+/// `--search`.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum SearchArg {
+    /// The multi-resolution search (thesis Algorithms 3, 5, 6).
+    Multires,
+    /// The exact branch-and-bound search.
+    Exact,
 }
 
 /// Arguments shared by `align` and `localize`.
@@ -72,6 +81,11 @@ pub struct AlignArgs {
     /// Print per-level particle counts and timings.
     #[arg(long)]
     pub verbose: bool,
+    /// How the global search explores the poses: `multires` (the thesis' multi-resolution
+    /// search, heuristic) or `exact` (branch and bound: the best pose of the finest lattice,
+    /// guaranteed).
+    #[arg(long, value_enum, default_value = "multires")]
+    pub search: SearchArg,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -134,6 +148,10 @@ fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
             region,
             prior,
             max_range: a.max_range,
+            search: match a.search {
+                SearchArg::Multires => SearchMode::MultiResolution,
+                SearchArg::Exact => SearchMode::Exact,
+            },
             ..Default::default()
         },
         refine: (!a.no_refine).then(IcpParams::default),
@@ -181,7 +199,8 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
             "trusted": r.trusted,
             "doubts": r.doubts,
             "search": {"T_target_source": matrix_rows(&s.pose), "evaluated": s.evaluated,
-                       "guard_acted": s.guard_acted, "seconds": s.seconds, "levels": levels},
+                       "guard_acted": s.guard_acted, "seconds": s.seconds, "levels": levels,
+                       "exact": s.exact, "score": s.score},
             "refinement": refine,
             "seconds": r.seconds,
         });

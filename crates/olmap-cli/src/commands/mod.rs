@@ -2,6 +2,7 @@
 
 pub mod align;
 pub mod beacons;
+pub mod bench;
 pub mod convert;
 pub mod demo;
 pub mod grid2d;

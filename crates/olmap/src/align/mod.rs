@@ -1,6 +1,7 @@
 //! Scan alignment: global search with no initial guess (thesis §5.3), significance, and
 //! refinement.
 
+mod bnb;
 mod dense;
 pub mod icp;
 mod params;
@@ -9,7 +10,7 @@ mod search;
 mod significance;
 mod target;
 
-pub use params::{Dof, Locus, Region, SearchParams};
+pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds, REFINE_REACH_CELLS,

@@ -26,6 +26,20 @@ impl Dof {
     }
 }
 
+/// How the global search explores the poses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SearchMode {
+    /// The thesis' multi-resolution search (Algorithms 3, 5, 6): poses within
+    /// `keep_ratio` of each level's best survive to the next level. Fast, heuristic: the
+    /// true optimum can be dropped at a coarse level. The default (see README).
+    #[default]
+    MultiResolution,
+    /// Branch and bound over rotations and translations with bounds from max-pooled map
+    /// levels: the best pose of the finest lattice, the same as the exhaustive search
+    /// (Algorithm 7). A locus region falls back to the multi-resolution search.
+    Exact,
+}
+
 /// Where the search looks.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Region {
@@ -176,6 +190,8 @@ pub struct SearchParams {
     pub ambiguity_distance: f64,
     /// See `ambiguity_distance` (default 10°).
     pub ambiguity_angle: f64,
+    /// How the poses are explored (default [`SearchMode::MultiResolution`]).
+    pub search: SearchMode,
 }
 
 impl SearchParams {
@@ -251,6 +267,7 @@ impl Default for SearchParams {
             max_range: 30.0,
             ambiguity_distance: 1.0,
             ambiguity_angle: 10f64.to_radians(),
+            search: SearchMode::MultiResolution,
         }
     }
 }

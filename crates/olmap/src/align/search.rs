@@ -19,7 +19,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::dense::{DenseGrid, LevelLookup};
-use super::params::{Dof, Locus, Region, SearchParams};
+use super::params::{Dof, Locus, Region, SearchMode, SearchParams};
 use super::significance::significance;
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
@@ -29,9 +29,9 @@ use crate::occupancy::{OccupancyList, Pyramid};
 
 /// One pose of the lattice: rotation indices (yaw, pitch, roll) and translation indices.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-struct Cand {
-    r: [i32; 3],
-    t: [i32; 3],
+pub(super) struct Cand {
+    pub(super) r: [i32; 3],
+    pub(super) t: [i32; 3],
 }
 
 /// A scored pose.
@@ -73,6 +73,9 @@ pub struct Alignment {
     pub pose: Pose,
     /// Its overlap `|L ∩ M|` at the finest level (voxels).
     pub overlap: u64,
+    /// Its ranking score: `2 * overlap - conflicts` when the target knows free space (see
+    /// [`SearchTarget`]), else `2 * overlap`; the searches maximise it.
+    pub score: i64,
     /// Scan voxels at the finest level.
     pub scan_voxels: u64,
     /// `overlap / scan_voxels`.
@@ -90,28 +93,34 @@ pub struct Alignment {
     pub levels: Vec<LevelReport>,
     /// Whether the survivor cap cut a level.
     pub guard_acted: bool,
-    /// Poses evaluated over all levels.
+    /// Poses evaluated over all levels (for the exact search: nodes bounded, leaves
+    /// included; the count depends on the thread timing, the result does not).
     pub evaluated: usize,
     /// Wall time of the whole search, seconds.
     pub seconds: f64,
+    /// Whether the result is guaranteed: the best pose of the finest lattice over the whole
+    /// region, with `ambiguity` and `candidates` those of [`exhaustive_search`]. Set by the
+    /// exact search ([`super::SearchMode::Exact`]) and the exhaustive search; the
+    /// multi-resolution search prunes heuristically and sets it false.
+    pub exact: bool,
 }
 
 /// Everything the lattice needs to turn indices into poses.
-struct Lattice {
-    t0: Vector3<f64>,
-    angle0: [f64; 3],
-    finest: f64,
-    range: f64,
-    searched_t: [bool; 3],
-    searched_r: [bool; 3],
+pub(super) struct Lattice {
+    pub(super) t0: Vector3<f64>,
+    pub(super) angle0: [f64; 3],
+    pub(super) finest: f64,
+    pub(super) range: f64,
+    pub(super) searched_t: [bool; 3],
+    pub(super) searched_r: [bool; 3],
 }
 
 impl Lattice {
-    fn cell(&self, level: usize) -> f64 {
+    pub(super) fn cell(&self, level: usize) -> f64 {
         self.finest * (1u64 << level) as f64
     }
 
-    fn dtheta(&self, level: usize) -> f64 {
+    pub(super) fn dtheta(&self, level: usize) -> f64 {
         self.cell(level) / self.range
     }
 
@@ -120,7 +129,7 @@ impl Lattice {
         [0, 1, 2].map(|i| self.angle0[i] + c.r[i] as f64 * d)
     }
 
-    fn pose(&self, c: &Cand, level: usize) -> Pose {
+    pub(super) fn pose(&self, c: &Cand, level: usize) -> Pose {
         let [yaw, pitch, roll] = self.angles(c, level);
         let cell = self.cell(level);
         let t = self.t0 + Vector3::new(c.t[0] as f64, c.t[1] as f64, c.t[2] as f64) * cell;
@@ -150,12 +159,12 @@ impl Lattice {
 }
 
 /// The scan and the target prepared for searching.
-struct Problem<'a> {
+pub(super) struct Problem<'a> {
     /// Scan voxel centres per level (sensor frame).
-    scan: Vec<Vec<Point3<f64>>>,
+    pub(super) scan: Vec<Vec<Point3<f64>>>,
     maps: Vec<LevelLookup<'a>>,
-    free: Vec<Option<&'a DenseGrid>>,
-    lattice: Lattice,
+    pub(super) free: Vec<Option<&'a DenseGrid>>,
+    pub(super) lattice: Lattice,
     /// Finest-level target voxels and bounding volume in cells.
     map_voxels: u64,
     map_cells: f64,
@@ -215,7 +224,7 @@ fn centres(list: &OccupancyList, max: usize) -> Vec<Point3<f64>> {
         .collect()
 }
 
-fn prepare<'a>(
+pub(super) fn prepare<'a>(
     source: &PointCloud,
     target: &'a SearchTarget,
     params: &SearchParams,
@@ -306,7 +315,7 @@ const LOCUS_START_LEVEL: usize = 2;
 const LOCUS_KEEP_RATIO: f64 = 0.5;
 
 /// A scored pose: ranking score `2 * hits - conflicts`, the hits, the pose.
-type Scored = (i64, u32, Cand);
+pub(super) type Scored = (i64, u32, Cand);
 
 /// Scores every candidate, in candidate order.
 fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
@@ -330,29 +339,37 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
             };
             let [yaw, pitch, roll] = l.angles(&probe, level);
             let rot = crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll);
-            let base: Vec<[i64; 3]> = scan
-                .iter()
-                .map(|c| {
-                    let p = rot * c.coords + l.t0;
-                    [
-                        (p.x / cell).floor() as i64,
-                        (p.y / cell).floor() as i64,
-                        (p.z / cell).floor() as i64,
-                    ]
-                })
-                .collect();
+            let base: Vec<[i64; 3]> = scan.iter().map(|c| key_of(&rot, c, l.t0, cell)).collect();
             ts.iter()
                 .map(|t| {
-                    let (dx, dy, dz) = (t[0] as i64, t[1] as i64, t[2] as i64);
-                    let (mut hits, mut conflicts) = (0u32, 0i64);
-                    for b in &base {
-                        let (x, y, z) = (b[0] + dx, b[1] + dy, b[2] + dz);
-                        if map.contains(x, y, z) {
-                            hits += 1;
-                        } else if free.is_some_and(|f| f.contains(x, y, z)) {
-                            conflicts += 1;
-                        }
-                    }
+                    let d = [t[0] as i64, t[1] as i64, t[2] as i64];
+                    // One loop per lookup kind: no dispatch per voxel.
+                    let (hits, conflicts) = match (map, free) {
+                        (LevelLookup::Dense(g), None) => count(
+                            &base,
+                            d,
+                            |x, y, z| g.contains(x, y, z),
+                            None::<fn(i64, i64, i64) -> bool>,
+                        ),
+                        (LevelLookup::Dense(g), Some(f)) => count(
+                            &base,
+                            d,
+                            |x, y, z| g.contains(x, y, z),
+                            Some(|x, y, z| f.contains(x, y, z)),
+                        ),
+                        (m, None) => count(
+                            &base,
+                            d,
+                            |x, y, z| m.contains(x, y, z),
+                            None::<fn(i64, i64, i64) -> bool>,
+                        ),
+                        (m, Some(f)) => count(
+                            &base,
+                            d,
+                            |x, y, z| m.contains(x, y, z),
+                            Some(|x, y, z| f.contains(x, y, z)),
+                        ),
+                    };
                     (2 * hits as i64 - conflicts, hits, Cand { r: *r, t: *t })
                 })
                 .collect()
@@ -361,9 +378,46 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
     scored.into_iter().flatten().collect()
 }
 
+/// Hits and conflicts of the keys moved by `d`.
+#[inline(always)]
+fn count(
+    base: &[[i64; 3]],
+    d: [i64; 3],
+    occupied: impl Fn(i64, i64, i64) -> bool,
+    free: Option<impl Fn(i64, i64, i64) -> bool>,
+) -> (u32, i64) {
+    let (mut hits, mut conflicts) = (0u32, 0i64);
+    for b in base {
+        let (x, y, z) = (b[0] + d[0], b[1] + d[1], b[2] + d[2]);
+        if occupied(x, y, z) {
+            hits += 1;
+        } else if let Some(f) = &free {
+            conflicts += f(x, y, z) as i64;
+        }
+    }
+    (hits, conflicts)
+}
+
+/// The cell of a scan voxel centre `c` rotated by `rot` and moved by `t0`: the one formula
+/// every search uses, so that they score a pose bit for bit alike.
+#[inline]
+pub(super) fn key_of(
+    rot: &nalgebra::Rotation3<f64>,
+    c: &Point3<f64>,
+    t0: Vector3<f64>,
+    cell: f64,
+) -> [i64; 3] {
+    let p = rot * c.coords + t0;
+    [
+        (p.x / cell).floor() as i64,
+        (p.y / cell).floor() as i64,
+        (p.z / cell).floor() as i64,
+    ]
+}
+
 /// The lowest score that survives: `keep_ratio` of the best for a positive best, the same
 /// margin below it otherwise.
-fn threshold(best: i64, keep_ratio: f64) -> i64 {
+pub(super) fn threshold(best: i64, keep_ratio: f64) -> i64 {
     best - ((1.0 - keep_ratio) * best.abs() as f64).floor() as i64
 }
 
@@ -384,7 +438,7 @@ fn score_level(
 }
 
 /// Best first; ties by lattice index (deterministic).
-fn rank(scored: &mut [Scored]) {
+pub(super) fn rank(scored: &mut [Scored]) {
     scored.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.2.cmp(&b.2)));
 }
 
@@ -392,7 +446,7 @@ fn angle_between(a: &Pose, b: &Pose) -> f64 {
     (a.rotation().inverse() * b.rotation()).angle()
 }
 
-fn finish(
+pub(super) fn finish(
     problem: &Problem,
     params: &SearchParams,
     scored: &[Scored],
@@ -432,6 +486,7 @@ fn finish(
     Alignment {
         pose: l.pose(&best, 0),
         overlap,
+        score: best_score,
         scan_voxels: n,
         overlap_fraction: if n > 0 {
             overlap as f64 / n as f64
@@ -445,10 +500,11 @@ fn finish(
         guard_acted,
         evaluated,
         seconds: start.elapsed().as_secs_f64(),
+        exact: false,
     }
 }
 
-fn level_report(
+pub(super) fn level_report(
     problem: &Problem,
     level: usize,
     evaluated: usize,
@@ -479,6 +535,9 @@ pub fn global_search(
     target: &SearchTarget,
     params: &SearchParams,
 ) -> Result<Alignment> {
+    if params.search == SearchMode::Exact && !matches!(params.region, Region::Locus(_)) {
+        return super::bnb::exact_search(source, target, params);
+    }
     let start = Instant::now();
     let problem = prepare(source, target, params)?;
     let top = match params.region {
@@ -534,11 +593,12 @@ pub fn global_search(
     unreachable!("the loop returns at level 0")
 }
 
-fn no_overlap(problem: &Problem, levels: Vec<LevelReport>, start: Instant) -> Alignment {
+pub(super) fn no_overlap(problem: &Problem, levels: Vec<LevelReport>, start: Instant) -> Alignment {
     let evaluated = levels.iter().map(|r| r.evaluated).sum();
     Alignment {
         pose: Pose::identity(),
         overlap: 0,
+        score: 0,
         scan_voxels: problem.scan[0].len() as u64,
         overlap_fraction: 0.0,
         significance: 0.0,
@@ -548,6 +608,7 @@ fn no_overlap(problem: &Problem, levels: Vec<LevelReport>, start: Instant) -> Al
         guard_acted: false,
         evaluated,
         seconds: start.elapsed().as_secs_f64(),
+        exact: false,
     }
 }
 
@@ -558,6 +619,48 @@ fn initial_candidates(
     target: &Pyramid,
     level: usize,
 ) -> Vec<Cand> {
+    let l = &problem.lattice;
+    let Some(([nyaw, ntilt, _], [nx, ny, nz])) = region_counts(problem, params, target, level)
+    else {
+        let dth = l.dtheta(level);
+        let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
+        let ntilt = match params.dof {
+            Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
+            _ => 1,
+        };
+        let Region::Locus(locus) = params.region else {
+            unreachable!("region_counts covers the other regions")
+        };
+        return locus_candidates(l, &locus, level, ntilt);
+    };
+    let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
+    for a in 0..nyaw {
+        for b in 0..ntilt {
+            for g in 0..ntilt {
+                for x in 0..nx {
+                    for y in 0..ny {
+                        for z in 0..nz {
+                            out.push(Cand {
+                                r: [a, b, g],
+                                t: [x, y, z],
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The lattice indices of the region at `level`: rotation counts (yaw, pitch, roll) and
+/// translation counts (x, y, z); indices run from 0 to the count. `None` for a locus.
+pub(super) fn region_counts(
+    problem: &Problem,
+    params: &SearchParams,
+    target: &Pyramid,
+    level: usize,
+) -> Option<([i32; 3], [i32; 3])> {
     let l = &problem.lattice;
     let cell = l.cell(level);
     let dth = l.dtheta(level);
@@ -584,27 +687,10 @@ fn initial_candidates(
             count(2.0 * z, cell),
             count(2.0 * yaw, dth),
         ),
-        Region::Locus(locus) => return locus_candidates(l, &locus, level, ntilt),
+        Region::Locus(_) => return None,
     };
     let nz = if l.searched_t[2] { nz } else { 1 };
-    let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
-    for a in 0..nyaw {
-        for b in 0..ntilt {
-            for g in 0..ntilt {
-                for x in 0..nx {
-                    for y in 0..ny {
-                        for z in 0..nz {
-                            out.push(Cand {
-                                r: [a, b, g],
-                                t: [x, y, z],
-                            });
-                        }
-                    }
-                }
-            }
-        }
-    }
-    out
+    Some(([nyaw, ntilt, ntilt], [nx, ny, nz]))
 }
 
 /// The start of a locus search at `level`: the lattice poses nearest to samples of the
@@ -672,5 +758,7 @@ pub fn exhaustive_search(
     if best_hits == 0 {
         return Ok(no_overlap(&problem, reports, start));
     }
-    Ok(finish(&problem, params, &scored, reports, start))
+    let mut a = finish(&problem, params, &scored, reports, start);
+    a.exact = true;
+    Ok(a)
 }

@@ -3,6 +3,7 @@
 //! datasets on disk (thesis §3.4.1, §4.3-4.4, §6.5). It gives olmap a default dataset with
 //! ground truth for the parts of the mission no public data covers.
 
+mod benchmark;
 mod dataset;
 mod rng;
 mod robot;
@@ -12,6 +13,7 @@ mod sighting;
 mod world;
 mod worlds;
 
+pub use benchmark::{thesis_localisation, LocalisationBenchmark, THESIS_RESOLUTION};
 pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
 pub use rng::{mix64, SimRng};
 pub use robot::{

@@ -1,6 +1,7 @@
 //! Integration tests of the olmap library (one binary: it links once).
 
 mod align;
+mod align_exact;
 mod align_synthetic;
 mod bad_input;
 mod beacon;
