@@ -69,6 +69,15 @@ enum Command {
     Demo(commands::demo::DemoArgs),
     /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
     Scanner(commands::scanner::ScannerArgs),
+    /// Draw a map as a PNG: a top view coloured by height (optional height band, grid,
+    /// path) or a depth image from a viewpoint (pinhole or panoramic).
+    Render(commands::render::RenderArgs),
+    /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
+    /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).
+    Navgrid(commands::render::NavgridArgs),
+    /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
+    /// segment.
+    Query(commands::render::QueryArgs),
 }
 
 fn main() -> ExitCode {
@@ -90,6 +99,9 @@ fn main() -> ExitCode {
         Command::Grid2d(a) => commands::grid2d::run(&a),
         Command::Beacons(a) => commands::beacons::run(&a),
         Command::Scanner(a) => commands::scanner::run(&a),
+        Command::Render(a) => commands::render::run_render(&a),
+        Command::Navgrid(a) => commands::render::run_navgrid(&a),
+        Command::Query(a) => commands::render::run_query(&a),
     };
     match result {
         Ok(code) => code,

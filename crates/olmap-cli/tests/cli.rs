@@ -162,6 +162,17 @@ fn demo_maps_a_team_and_each_robot_alone() {
     assert!(v["relative_frames"].as_array().unwrap().len() == 1);
     let back = olmap::io::sim_dataset::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
     assert_eq!(back.manifest.robots.len(), 2);
+    // The HTML report: self-contained, with the team's and both robots' top views, the
+    // error histogram and the entropy curve as inlined PNGs.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert_eq!(
+        html.matches("src=\"data:image/png;base64,").count(),
+        5,
+        "{html}"
+    );
+    assert!(html.contains("Figure 6.11") && html.contains("Map entropy"));
+    assert!(!html.contains("src=\"http") && !html.contains("src=\"file"));
     // A second run replaces its own dataset and gives the same poses.
     let again = run();
     assert_eq!(again["placements"], v["placements"]);
@@ -202,6 +213,7 @@ fn team_maps_a_simulated_dataset_and_refuses_a_missing_one() {
         "team_poses.txt",
         "team.store",
         "report.json",
+        "report.html",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
@@ -789,4 +801,191 @@ fn scanner_convert_and_repeatability_of_a_simulated_raw_log() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("trigger"));
+}
+
+/// A 8 x 6 x 3 m room (inner corner at (0.03, 0.04, 0.02), so no face lies on a 0.1 m voxel
+/// boundary) scanned from (4.03, 3.04, 1.0) by a noise-free lidar: the map's end points,
+/// written with the scan pose into `dir`.
+fn scanned_room(dir: &std::path::Path) -> (olmap::sim::World, olmap::occupancy::OccupancyList) {
+    use nalgebra::{Point3, Vector3};
+    use olmap::sim::{room_shell, Material, Object, RangeNoise, SpinningLidar, World};
+    let objects = room_shell(
+        Point3::new(0.03, 0.04, 0.02),
+        Vector3::new(8.0, 6.0, 3.0),
+        0.1,
+        true,
+    )
+    .into_iter()
+    .enumerate()
+    .map(|(i, shape)| Object {
+        shape,
+        material: Material::WALL,
+        id: i as u32,
+    })
+    .collect();
+    let world = World::new("room", objects);
+    let lidar = SpinningLidar {
+        beams: 241,
+        elevation_min: (-60f64).to_radians(),
+        elevation_max: 60f64.to_radians(),
+        azimuth_step: 0.5f64.to_radians(),
+        noise: RangeNoise::none(),
+    };
+    let pose = olmap::geometry::Pose::from_xyz_ypr(4.03, 3.04, 1.0, 0.0, 0.0, 0.0);
+    let cloud = lidar.scan(&world, &[], &pose, 1, 0);
+    let mut map = olmap::occupancy::OccupancyList::new(0.1).unwrap();
+    map.add_points(&cloud, &pose, 1);
+    olmap::occupancy::write_map(dir.join("room.olm"), &map).unwrap();
+    let mut poses = olmap::geometry::PoseList::default();
+    poses.push("scan000", pose);
+    poses.write_path(dir.join("poses.txt")).unwrap();
+    (world, map)
+}
+
+#[test]
+fn render_navgrid_and_query_a_scanned_room() {
+    let dir = tempfile::tempdir().unwrap();
+    let (world, map) = scanned_room(dir.path());
+    let m = dir.path().join("room.olm");
+    let m = m.to_str().unwrap();
+    let voxel_diagonal = 3f64.sqrt() * 0.1;
+    // Top view in a band: the walls' cells drawn, the inside left white (or grid grey).
+    let top = dir.path().join("top.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        top.to_str().unwrap(),
+        "--band",
+        "0.3,2.5",
+        "--json",
+    ]));
+    let img = image::open(&top).unwrap().to_rgb8();
+    assert_eq!(img.width() as u64, v["width"].as_u64().unwrap());
+    let (x0, y1, px) = (
+        v["x_min_m"].as_f64().unwrap(),
+        v["y_max_m"].as_f64().unwrap(),
+        v["pixel_m"].as_f64().unwrap(),
+    );
+    let at = |x: f64, y: f64| {
+        img.get_pixel(((x - x0) / px) as u32, ((y1 - y) / px) as u32)
+            .0
+    };
+    let blank = |p: [u8; 3]| p == [255, 255, 255] || p == [215, 215, 215];
+    for y in [1.05, 3.05, 5.05] {
+        assert!(
+            !blank(at(0.05, y)) && !blank(at(8.05, y)),
+            "walls at y = {y}"
+        );
+    }
+    for (x, y) in [(2.05, 2.05), (4.05, 3.05), (6.55, 4.55)] {
+        assert!(blank(at(x, y)), "inside at ({x}, {y})");
+    }
+    // Depth image: the centre pixel looks along +x from the scan position at the far wall.
+    let depth = dir.path().join("depth.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        depth.to_str().unwrap(),
+        "--view",
+        "depth",
+        "--from",
+        "4.03,3.04,1.0,0",
+        "--size",
+        "41x31",
+        "--fov",
+        "60",
+        "--json",
+    ]));
+    let o = nalgebra::Point3::new(4.03, 3.04, 1.0);
+    let truth = world
+        .cast(&o, &nalgebra::Vector3::x(), 30.0)
+        .unwrap()
+        .distance;
+    let centre = v["centre_range_m"].as_f64().unwrap();
+    assert!(
+        (centre - truth).abs() <= voxel_diagonal,
+        "{centre} vs {truth}"
+    );
+    assert_eq!(image::open(&depth).unwrap().width(), 41);
+    let r = olmap(&[
+        "render",
+        m,
+        "-o",
+        depth.to_str().unwrap(),
+        "--view",
+        "depth",
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--from"));
+    // Navigation grid: inside free, walls occupied, outside unknown.
+    let pgm = dir.path().join("grid.pgm");
+    let poses = dir.path().join("poses.txt");
+    let v = json(&olmap(&[
+        "navgrid",
+        m,
+        "--poses",
+        poses.to_str().unwrap(),
+        "--band",
+        "0.1,1.2",
+        "-o",
+        pgm.to_str().unwrap(),
+        "--json",
+    ]));
+    let grid = olmap::grid2d::read_ros_map(v["yaml"].as_str().unwrap()).unwrap();
+    use olmap::grid2d::Trinary;
+    let c = |i: i32| (i as f64 + 0.5) * 0.1;
+    for i in 1..=79 {
+        for j in 1..=59 {
+            assert_eq!(grid.at_world(c(i), c(j)), Some(Trinary::Free), "({i}, {j})");
+        }
+    }
+    for j in 0..=60 {
+        assert_eq!(grid.at_world(c(0), c(j)), Some(Trinary::Occupied));
+        assert_eq!(grid.at_world(c(80), c(j)), Some(Trinary::Occupied));
+    }
+    assert_eq!(grid.at_world(c(-1), c(30)), Some(Trinary::Unknown));
+    assert_eq!(v["free"].as_u64().unwrap() as usize, grid.counts().free);
+    // Queries: a ray to the north wall, a wall voxel, free and blocked segments, a radius.
+    let v = json(&olmap(&[
+        "query",
+        m,
+        "--ray",
+        "4.03,3.04,1.0,0,1,0",
+        "--json",
+    ]));
+    let truth = world
+        .cast(&o, &nalgebra::Vector3::y(), 30.0)
+        .unwrap()
+        .distance;
+    let d = v["distance_m"].as_f64().unwrap();
+    assert!((d - truth).abs() <= voxel_diagonal, "{d} vs {truth}");
+    let v = json(&olmap(&["query", m, "--at", "0.05,3.05,1.05", "--json"]));
+    assert_eq!(v["occupied"], true);
+    let v = json(&olmap(&["query", m, "--segment", "2,2,1,6,4,1", "--json"]));
+    assert_eq!(v["free"], true);
+    let v = json(&olmap(&["query", m, "--segment", "2,2,1,9,2,1", "--json"]));
+    assert_eq!(v["free"], false);
+    let v = json(&olmap(&[
+        "query",
+        m,
+        "--radius",
+        "0.05,3.05,1.05,0.3",
+        "--json",
+    ]));
+    let want = map
+        .occupied_within(&nalgebra::Point3::new(0.05, 3.05, 1.05), 0.3)
+        .unwrap()
+        .len();
+    assert!(want > 0);
+    assert_eq!(v["count"].as_u64().unwrap() as usize, want);
+    // One question at a time, and a bad one is refused.
+    assert!(!olmap(&["query", m]).status.success());
+    assert!(!olmap(&["query", m, "--ray", "1,2,3"]).status.success());
+    for cmd in ["render", "navgrid", "query"] {
+        let h = olmap(&[cmd, "--help"]);
+        assert!(h.status.success());
+        assert!(String::from_utf8_lossy(&h.stdout).contains("--json"));
+    }
 }
