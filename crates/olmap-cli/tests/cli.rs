@@ -223,6 +223,9 @@ fn team_maps_a_simulated_dataset_and_refuses_a_missing_one() {
     let poses = olmap::geometry::PoseList::read_path(out.join("team_poses.txt")).unwrap();
     assert_eq!(poses.len(), v["placements"].as_array().unwrap().len());
     assert!(v["evaluation"]["solo"].is_null());
+    // The PLY of the map carries one colour per voxel, by height, for 3D viewers.
+    let ply = olmap::io::read_cloud(out.join("team.ply")).unwrap().cloud;
+    assert_eq!(ply.colors().map(|c| c.len()), Some(ply.len()));
     let missing = dir.path().join("nowhere");
     let r = olmap(&[
         "team",

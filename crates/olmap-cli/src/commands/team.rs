@@ -110,7 +110,7 @@ fn pose_json(p: &Pose) -> Value {
            "pitch_deg": pitch.to_degrees(), "roll_deg": roll.to_degrees()})
 }
 
-/// Writes the joint map as .olm, .ply (voxel centres) and .bt, checking the .olm reads back.
+/// Writes the joint map as .olm, .ply (voxel centres coloured by height) and .bt, checking the .olm reads back.
 fn write_maps(out: &Path, stem: &str, map: &olmap::occupancy::OccupancyList) -> anyhow::Result<()> {
     let olm = out.join(format!("{stem}.olm"));
     occupancy::write_map(&olm, map)?;
@@ -120,9 +120,11 @@ fn write_maps(out: &Path, stem: &str, map: &olmap::occupancy::OccupancyList) -> 
         olm.display()
     );
     occupancy::write_map(out.join(format!("{stem}.bt")), map)?;
+    // Voxel centres coloured by height, counts as intensity: CloudCompare and MeshLab
+    // show the colours.
     io::write_cloud(
         out.join(format!("{stem}.ply")),
-        &map.to_cloud(),
+        &olmap::render::height_coloured_cloud(map, None),
         &WriteOptions::default(),
     )?;
     Ok(())

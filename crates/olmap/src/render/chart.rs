@@ -146,3 +146,42 @@ pub fn line_chart(series: &[Series], width: u32, height: u32) -> Result<RgbImage
     }
     Ok(image)
 }
+
+/// Particles per level of a global search (poses evaluated, blue, and kept for the next
+/// level, red), coarsest level on the left, heights on a log scale (`ln(1 + n)`): how the
+/// multi-resolution search narrows down (thesis §5.3.3).
+///
+/// ```
+/// use olmap::align::LevelReport;
+/// use olmap::render::level_chart;
+/// let level = |l: usize, evaluated: usize, survivors: usize| LevelReport {
+///     level: l, resolution: 0.1 * 2f64.powi(l as i32), angular_step: 0.1,
+///     scan_voxels: 100, evaluated, passed: survivors, survivors, best_overlap: 50,
+///     seconds: 0.0,
+/// };
+/// let img = level_chart(&[level(0, 500, 1), level(1, 20_000, 40)], 300, 150).unwrap();
+/// assert_eq!(img.width(), 300);
+/// ```
+pub fn level_chart(
+    levels: &[crate::align::LevelReport],
+    width: u32,
+    height: u32,
+) -> Result<RgbImage> {
+    let mut sorted: Vec<&crate::align::LevelReport> = levels.iter().collect();
+    sorted.sort_by_key(|l| std::cmp::Reverse(l.level));
+    bar_chart(
+        &[
+            Series {
+                values: sorted.iter().map(|l| l.evaluated as f64).collect(),
+                colour: super::PALETTE[0],
+            },
+            Series {
+                values: sorted.iter().map(|l| l.survivors as f64).collect(),
+                colour: super::PALETTE[1],
+            },
+        ],
+        width,
+        height,
+        true,
+    )
+}

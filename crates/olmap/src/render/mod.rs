@@ -6,8 +6,11 @@
 //!   panoramic camera (Figure 5.6);
 //! * [`overlap_surface`]: the best-heading overlap of a scan over a grid of x, y
 //!   positions, drawn as a heat map (Figure 6.6);
-//! * [`bar_chart`] and [`line_chart`]: histograms (solo vs team errors, Figure 6.11;
-//!   particles per search level) and curves (map entropy per scan).
+//! * [`bar_chart`], [`level_chart`] and [`line_chart`]: histograms (solo vs team errors,
+//!   Figure 6.11; particles per search level) and curves (map entropy per scan).
+//!
+//! [`height_coloured_cloud`] gives the voxels as a point cloud coloured by height for
+//! 3D viewers (written as PLY with colours).
 //!
 //! Images are [`image::RgbImage`]s; [`png_bytes`] encodes one and [`write_png`] writes it
 //! atomically. Charts are drawn with `plotters`' bitmap backend and carry no text (no font
@@ -16,13 +19,15 @@
 
 mod chart;
 mod colour;
+mod coloured_cloud;
 mod depth;
 mod overlap_surface;
 mod png;
 mod top_view;
 
-pub use chart::{bar_chart, line_chart, Series};
+pub use chart::{bar_chart, level_chart, line_chart, Series};
 pub use colour::{heat_colour, height_colour, PALETTE};
+pub use coloured_cloud::height_coloured_cloud;
 pub use depth::{render_depth, Camera, DepthImage};
 pub use image::{Rgb, RgbImage};
 pub use overlap_surface::{overlap_surface, OverlapSurface, OverlapSurfaceParams};

@@ -137,7 +137,7 @@ impl HtmlReport {
              td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}\n\
              th {{ background: #eee; }}\n\
              figure {{ display: inline-block; margin: 0.5em 1em 1em 0; vertical-align: top; }}\n\
-             img {{ max-width: 100%; border: 1px solid #ccc; image-rendering: pixelated; }}\n\
+             img {{ max-width: 100%; min-width: 420px; border: 1px solid #ccc; image-rendering: pixelated; }}\n\
              figcaption {{ font-size: 0.9em; color: #444; max-width: 520px; }}\n\
              pre {{ background: #f6f6f6; padding: 0.5em; overflow-x: auto; }}\n\
              </style>\n</head>\n<body>\n<h1>{t}</h1>\n{b}</body>\n</html>\n",

@@ -473,3 +473,46 @@ fn bar_heights_follow_values_and_report_inlines_pngs() {
     let back = image::load_from_memory(&png).unwrap().to_rgb8();
     assert_eq!(back, img);
 }
+
+#[test]
+fn level_chart_bars_shrink_with_the_search() {
+    use olmap::align::LevelReport;
+    use olmap::render::level_chart;
+    let level = |l: usize, evaluated: usize, survivors: usize| LevelReport {
+        level: l,
+        resolution: 0.1 * 2f64.powi(l as i32),
+        angular_step: 0.1,
+        scan_voxels: 100,
+        evaluated,
+        passed: survivors,
+        survivors,
+        best_overlap: 10,
+        seconds: 0.0,
+    };
+    // Coarsest (level 2) first: many poses evaluated there, few kept at the finest.
+    let levels = [level(0, 100, 1), level(1, 1000, 10), level(2, 100_000, 100)];
+    let img = level_chart(&levels, 320, 200).unwrap();
+    let tallest = |colour: [u8; 3], bin: usize| {
+        let bin_w = (320 - 24) as f64 / 3.0;
+        let x0 = (8.0 + 1.0 + bin as f64 * bin_w) as u32;
+        (x0..x0 + bin_w as u32)
+            .map(|x| {
+                (0..200)
+                    .filter(|&y| img.get_pixel(x, y).0 == colour)
+                    .count()
+            })
+            .max()
+            .unwrap()
+    };
+    let evaluated: Vec<usize> = (0..3).map(|b| tallest(PALETTE[0], b)).collect();
+    let kept: Vec<usize> = (0..3).map(|b| tallest(PALETTE[1], b)).collect();
+    assert!(
+        evaluated[0] > evaluated[1] && evaluated[1] > evaluated[2],
+        "{evaluated:?}"
+    );
+    assert!(kept[0] > kept[1] && kept[1] > kept[2], "{kept:?}");
+    // Log scale: ln(1 + 100000) / ln(1 + 100) = 2.49, the tallest bar's ratio within a pixel.
+    let ratio = evaluated[0] as f64 / evaluated[2] as f64;
+    let want = (100_001f64).ln() / (101f64).ln();
+    assert!((ratio - want).abs() < 0.1, "{ratio} vs {want}");
+}
