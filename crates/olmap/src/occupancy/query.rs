@@ -80,7 +80,7 @@ impl OccupancyList {
         while let Some(key) = ray.next() {
             let count = self.count(key);
             if count >= min_count {
-                let distance = ray.entry() * max_range;
+                let distance = ray.entry().max(0.0) * max_range;
                 return Ok(Some(RayHit {
                     key,
                     count,

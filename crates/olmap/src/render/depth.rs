@@ -115,11 +115,17 @@ impl DepthImage {
     }
 
     /// A grey picture as in the thesis: near surfaces light, far ones dark (linear in
-    /// range up to the maximum range), no hit dark blue.
+    /// range from 0 to the farthest hit), no hit dark blue.
     pub fn to_image(&self) -> RgbImage {
+        let far = self
+            .ranges
+            .iter()
+            .filter(|r| !r.is_nan())
+            .fold(0.0f64, |m, &r| m.max(r as f64))
+            .max(1e-9);
         RgbImage::from_fn(self.width, self.height, |u, v| match self.range(u, v) {
             Some(r) => {
-                let g = (235.0 * (1.0 - r / self.max_range).clamp(0.0, 1.0) + 20.0) as u8;
+                let g = (235.0 * (1.0 - r / far).clamp(0.0, 1.0) + 20.0) as u8;
                 Rgb([g, g, g])
             }
             None => Rgb([10, 10, 40]),

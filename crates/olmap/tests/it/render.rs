@@ -230,9 +230,14 @@ fn depth_image_centre_is_the_analytic_range() {
             "column {u}: {got} vs {truth}"
         );
     }
-    // The picture: near is lighter than far.
+    // The picture: near is lighter than far (the wall a quarter turn to the left is
+    // nearer than the one straight ahead).
     let img = depth.to_image();
     assert_eq!((img.width(), img.height()), (360, 61));
+    let (ahead, left) = (depth.range(180, 30).unwrap(), depth.range(90, 30).unwrap());
+    let (ga, gl) = (img.get_pixel(180, 30).0[0], img.get_pixel(90, 30).0[0]);
+    assert_eq!(ahead < left, ga > gl, "{ahead} m: {ga}, {left} m: {gl}");
+    assert_ne!(ga, gl);
 }
 
 #[test]
