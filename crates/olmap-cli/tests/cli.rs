@@ -173,6 +173,11 @@ fn demo_maps_a_team_and_each_robot_alone() {
     );
     assert!(html.contains("Figure 6.11") && html.contains("Map entropy"));
     assert!(!html.contains("src=\"http") && !html.contains("src=\"file"));
+    // Map entropy (thesis (7.4)) after every scan that joined, one value each: the listed
+    // voxels' terms with p0 = 0.5 are each below zero, so the first is negative.
+    let h = v["entropy_after_scan"].as_array().unwrap();
+    assert_eq!(h.len(), v["placements"].as_array().unwrap().len());
+    assert!(h[0].as_f64().unwrap() < 0.0, "{h:?}");
     // A second run replaces its own dataset and gives the same poses.
     let again = run();
     assert_eq!(again["placements"], v["placements"]);

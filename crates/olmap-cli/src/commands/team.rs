@@ -234,6 +234,7 @@ pub fn run_pipeline(
         "cleared_points": team.cleared_points,
         "registrations": team.build.registrations,
         "seconds": team.build.seconds,
+        "entropy_after_scan": team.build.entropy_after_scan,
         "voxels": team.build.map.len(),
         "resolution_m": team.build.map.resolution(),
         "frames": frames,
