@@ -70,7 +70,8 @@ enum Command {
     /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
     Scanner(commands::scanner::ScannerArgs),
     /// Draw a map as a PNG: a top view coloured by height (optional height band, grid,
-    /// path) or a depth image from a viewpoint (pinhole or panoramic).
+    /// path), a depth image from a viewpoint (pinhole or panoramic), or the overlap
+    /// surface of a scan around a pose (heat map).
     Render(commands::render::RenderArgs),
     /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
     /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).

@@ -811,6 +811,23 @@ fn scanner_convert_and_repeatability_of_a_simulated_raw_log() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("trigger"));
 }
 
+fn room_scan_pose() -> olmap::geometry::Pose {
+    olmap::geometry::Pose::from_xyz_ypr(4.03, 3.04, 1.0, 0.0, 0.0, 0.0)
+}
+
+/// A second scan of the room from the same pose (another noise seed; the lidar is exact),
+/// in the sensor frame, with a coarser beam pattern.
+fn scanned_room_cloud(world: &olmap::sim::World) -> olmap::cloud::PointCloud {
+    let lidar = olmap::sim::SpinningLidar {
+        beams: 61,
+        elevation_min: (-60f64).to_radians(),
+        elevation_max: 60f64.to_radians(),
+        azimuth_step: 1f64.to_radians(),
+        noise: olmap::sim::RangeNoise::none(),
+    };
+    lidar.scan(world, &[], &room_scan_pose(), 2, 0)
+}
+
 /// A 8 x 6 x 3 m room (inner corner at (0.03, 0.04, 0.02), so no face lies on a 0.1 m voxel
 /// boundary) scanned from (4.03, 3.04, 1.0) by a noise-free lidar: the map's end points,
 /// written with the scan pose into `dir`.
@@ -839,7 +856,7 @@ fn scanned_room(dir: &std::path::Path) -> (olmap::sim::World, olmap::occupancy::
         azimuth_step: 0.5f64.to_radians(),
         noise: RangeNoise::none(),
     };
-    let pose = olmap::geometry::Pose::from_xyz_ypr(4.03, 3.04, 1.0, 0.0, 0.0, 0.0);
+    let pose = room_scan_pose();
     let cloud = lidar.scan(&world, &[], &pose, 1, 0);
     let mut map = olmap::occupancy::OccupancyList::new(0.1).unwrap();
     map.add_points(&cloud, &pose, 1);
@@ -927,6 +944,42 @@ fn render_navgrid_and_query_a_scanned_room() {
     ]);
     assert!(!r.status.success());
     assert!(String::from_utf8_lossy(&r.stderr).contains("--from"));
+    // Overlap surface (Figure 6.6): the room's own scan, searched around a pose 0.36 m off
+    // the truth, peaks at the scan position (within one 0.1 m sample) and heading.
+    let pcd = dir.path().join("scan.pcd");
+    let cloud = scanned_room_cloud(&world);
+    olmap::io::write_cloud(&pcd, &cloud, &Default::default()).unwrap();
+    let heat = dir.path().join("overlap.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        heat.to_str().unwrap(),
+        "--view",
+        "overlap",
+        "--scan",
+        pcd.to_str().unwrap(),
+        "--from",
+        "4.33,2.84,1.0,0",
+        "--half-width",
+        "0.6",
+        "--headings",
+        "12",
+        "--json",
+    ]));
+    let peak = &v["peak"];
+    assert!(
+        (peak["x_m"].as_f64().unwrap() - 4.03).abs() <= 0.1 + 1e-9,
+        "{v}"
+    );
+    assert!(
+        (peak["y_m"].as_f64().unwrap() - 3.04).abs() <= 0.1 + 1e-9,
+        "{v}"
+    );
+    // The scan position is the room's centre: a half turn fits as well as none.
+    let yaw = peak["yaw_deg"].as_f64().unwrap().rem_euclid(180.0);
+    assert!(yaw.min(180.0 - yaw) < 1e-6, "{v}");
+    assert_eq!(image::open(&heat).unwrap().width(), 13 * 4);
     // Navigation grid: inside free, walls occupied, outside unknown.
     let pgm = dir.path().join("grid.pgm");
     let poses = dir.path().join("poses.txt");

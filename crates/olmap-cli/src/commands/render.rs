@@ -10,7 +10,10 @@ use nalgebra::{Point3, Vector3};
 use olmap::geometry::{Pose, PoseList};
 use olmap::grid2d::{navigation_grid, write_ros_map, NavGridParams};
 use olmap::occupancy::{self, OccupancyList};
-use olmap::render::{render_depth, render_top_view, write_png, Camera, TopViewOptions};
+use olmap::render::{
+    overlap_surface, render_depth, render_top_view, write_png, Camera, OverlapSurfaceParams,
+    TopViewOptions,
+};
 use serde_json::json;
 
 use crate::args::parse_numbers;
@@ -22,6 +25,9 @@ pub enum ViewArg {
     Top,
     /// A depth image from a viewpoint (--from), near light and far dark.
     Depth,
+    /// The overlap surface of a scan (--scan) around a pose (--from): the best-heading
+    /// overlap over x, y as a heat map (thesis Figure 6.6).
+    Overlap,
 }
 
 /// Cameras of the depth view.
@@ -44,7 +50,8 @@ pub struct RenderArgs {
     /// What to draw.
     #[arg(long, value_enum, default_value = "top")]
     pub view: ViewArg,
-    /// Viewpoint of the depth view: x,y,z (m) and yaw (degrees), looking horizontally.
+    /// Viewpoint of the depth view, or centre of the overlap surface: x,y,z (m) and yaw
+    /// (degrees), level.
     #[arg(long, value_name = "X,Y,Z,YAW", allow_hyphen_values = true)]
     pub from: Option<String>,
     /// Camera of the depth view.
@@ -69,6 +76,16 @@ pub struct RenderArgs {
     /// Top view: a pose list whose positions are drawn as a path.
     #[arg(long, value_name = "FILE")]
     pub poses: Option<PathBuf>,
+    /// Overlap view: the scan (any point-cloud format, its own frame), voxelised at the
+    /// map's resolution.
+    #[arg(long, value_name = "FILE")]
+    pub scan: Option<PathBuf>,
+    /// Overlap view: the surface covers the centre ± this many metres in x and y.
+    #[arg(long, default_value_t = 2.0)]
+    pub half_width: f64,
+    /// Overlap view: headings tried per position (evenly over the full turn).
+    #[arg(long, default_value_t = 36)]
+    pub headings: u32,
     /// Only voxels with at least this count.
     #[arg(long, default_value_t = 1)]
     pub min_count: u16,
@@ -187,6 +204,34 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<ExitCode> {
             json!({"output": a.output.display().to_string(), "view": "depth",
                    "width": w, "height": h, "hits": depth.hits(),
                    "centre_range_m": depth.range(w / 2, h / 2)})
+        }
+        ViewArg::Overlap => {
+            let scan_path = a
+                .scan
+                .as_ref()
+                .context("--view overlap needs --scan FILE")?;
+            let from = a
+                .from
+                .as_deref()
+                .context("--view overlap needs --from X,Y,Z,YAW (the surface's centre)")?;
+            let [x, y, z, yaw] = parse_numbers::<4>(from, "--from")?;
+            let cloud = olmap::io::read_cloud(scan_path)?.cloud;
+            let scan = OccupancyList::from_cloud(&cloud, map.resolution())?;
+            let params = OverlapSurfaceParams {
+                half_width: a.half_width,
+                stride: 1,
+                headings: a.headings,
+            };
+            let centre = Pose::from_xyz_ypr(x, y, z, yaw.to_radians(), 0.0, 0.0);
+            let surface = overlap_surface(&map.threshold(a.min_count), &scan, &centre, &params)?;
+            let img = surface.to_image(4);
+            write_png(&a.output, &img)?;
+            let (px, py, pyaw, best) = surface.peak();
+            json!({"output": a.output.display().to_string(), "view": "overlap",
+                   "width": img.width(), "height": img.height(), "samples_per_side": surface.n,
+                   "step_m": surface.step, "x0_m": surface.x0, "y0_m": surface.y0,
+                   "scan_voxels": scan.len(),
+                   "peak": {"x_m": px, "y_m": py, "yaw_deg": pyaw.to_degrees(), "overlap": best}})
         }
     };
     if a.json {
