@@ -65,15 +65,18 @@ impl OverlapSurface {
         )
     }
 
-    /// A heat map, `pixels` per sample, highest y at the top, overlap from black (0)
-    /// through red and yellow to white (the peak).
+    /// A heat map, `pixels` per sample, highest y at the top, overlap from black (the
+    /// lowest on the surface) through red and yellow to white (the peak): floors and
+    /// ceilings overlap everywhere, so the scale starts at the surface's minimum.
     pub fn to_image(&self, pixels: u32) -> RgbImage {
         let p = pixels.max(1);
-        let top = self.values.iter().copied().max().unwrap_or(0).max(1) as f64;
+        let top = self.values.iter().copied().max().unwrap_or(0) as f64;
+        let low = self.values.iter().copied().min().unwrap_or(0) as f64;
+        let span = (top - low).max(1.0);
         let n = self.n as u32;
         RgbImage::from_fn(n * p, n * p, |u, v| {
             let (c, r) = (u / p, n - 1 - v / p);
-            heat_colour(self.values[(r * n + c) as usize] as f64 / top)
+            heat_colour((self.values[(r * n + c) as usize] as f64 - low) / span)
         })
     }
 }
