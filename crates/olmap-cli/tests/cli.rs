@@ -490,6 +490,10 @@ fn map_a_3dtk_folder_then_eval_and_export() {
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(saved["placed"], v["placed"]);
+    // The HTML report beside it: the map's top view and the entropy curve, inlined.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    assert!(html.contains("scan002"));
     // Against the reference (data README §1.7 tolerances, checked on the total here).
     let reference = folder.join("reference_poses_rh_m.txt");
     let e = json(&olmap(&[
