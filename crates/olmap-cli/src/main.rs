@@ -73,6 +73,16 @@ enum Command {
     /// evaluations, alignment and localisation in both search modes, map building, thread
     /// scaling, peak memory.
     Bench(commands::bench::BenchArgs),
+    /// Draw a map as a PNG: a top view coloured by height (optional height band, grid,
+    /// path), a depth image from a viewpoint (pinhole or panoramic), or the overlap
+    /// surface of a scan around a pose (heat map).
+    Render(commands::render::RenderArgs),
+    /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
+    /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).
+    Navgrid(commands::render::NavgridArgs),
+    /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
+    /// segment.
+    Query(commands::render::QueryArgs),
 }
 
 fn main() -> ExitCode {
@@ -95,6 +105,9 @@ fn main() -> ExitCode {
         Command::Beacons(a) => commands::beacons::run(&a),
         Command::Scanner(a) => commands::scanner::run(&a),
         Command::Bench(a) => commands::bench::run(&a),
+        Command::Render(a) => commands::render::run_render(&a),
+        Command::Navgrid(a) => commands::render::run_navgrid(&a),
+        Command::Query(a) => commands::render::run_query(&a),
     };
     match result {
         Ok(code) => code,

@@ -162,6 +162,22 @@ fn demo_maps_a_team_and_each_robot_alone() {
     assert!(v["relative_frames"].as_array().unwrap().len() == 1);
     let back = olmap::io::sim_dataset::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
     assert_eq!(back.manifest.robots.len(), 2);
+    // The HTML report: self-contained, with the team's and both robots' top views, the
+    // error histogram and the entropy curve as inlined PNGs.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert_eq!(
+        html.matches("src=\"data:image/png;base64,").count(),
+        5,
+        "{html}"
+    );
+    assert!(html.contains("Figure 6.11") && html.contains("Map entropy"));
+    assert!(!html.contains("src=\"http") && !html.contains("src=\"file"));
+    // Map entropy (thesis (7.4)) after every scan that joined, one value each: the listed
+    // voxels' terms with p0 = 0.5 are each below zero, so the first is negative.
+    let h = v["entropy_after_scan"].as_array().unwrap();
+    assert_eq!(h.len(), v["placements"].as_array().unwrap().len());
+    assert!(h[0].as_f64().unwrap() < 0.0, "{h:?}");
     // A second run replaces its own dataset and gives the same poses.
     let again = run();
     assert_eq!(again["placements"], v["placements"]);
@@ -202,6 +218,7 @@ fn team_maps_a_simulated_dataset_and_refuses_a_missing_one() {
         "team_poses.txt",
         "team.store",
         "report.json",
+        "report.html",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
@@ -211,6 +228,9 @@ fn team_maps_a_simulated_dataset_and_refuses_a_missing_one() {
     let poses = olmap::geometry::PoseList::read_path(out.join("team_poses.txt")).unwrap();
     assert_eq!(poses.len(), v["placements"].as_array().unwrap().len());
     assert!(v["evaluation"]["solo"].is_null());
+    // The PLY of the map carries one colour per voxel, by height, for 3D viewers.
+    let ply = olmap::io::read_cloud(out.join("team.ply")).unwrap().cloud;
+    assert_eq!(ply.colors().map(|c| c.len()), Some(ply.len()));
     let missing = dir.path().join("nowhere");
     let r = olmap(&[
         "team",
@@ -470,6 +490,10 @@ fn map_a_3dtk_folder_then_eval_and_export() {
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(saved["placed"], v["placed"]);
+    // The HTML report beside it: the map's top view and the entropy curve, inlined.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    assert!(html.contains("scan002"));
     // Against the reference (data README §1.7 tolerances, checked on the total here).
     let reference = folder.join("reference_poses_rh_m.txt");
     let e = json(&olmap(&[
@@ -890,4 +914,244 @@ fn align_with_the_exact_search_in_a_window() {
     let tx = exact["T_target_source"][0][3].as_f64().unwrap();
     assert!((tx - 1.568).abs() < 0.05, "{tx}");
     assert_eq!(exact["trusted"], true);
+}
+
+fn room_scan_pose() -> olmap::geometry::Pose {
+    olmap::geometry::Pose::from_xyz_ypr(4.03, 3.04, 1.0, 0.0, 0.0, 0.0)
+}
+
+/// A second scan of the room from the same pose (another noise seed; the lidar is exact),
+/// in the sensor frame, with a coarser beam pattern.
+fn scanned_room_cloud(world: &olmap::sim::World) -> olmap::cloud::PointCloud {
+    let lidar = olmap::sim::SpinningLidar {
+        beams: 61,
+        elevation_min: (-60f64).to_radians(),
+        elevation_max: 60f64.to_radians(),
+        azimuth_step: 1f64.to_radians(),
+        noise: olmap::sim::RangeNoise::none(),
+    };
+    lidar.scan(world, &[], &room_scan_pose(), 2, 0)
+}
+
+/// A 8 x 6 x 3 m room (inner corner at (0.03, 0.04, 0.02), so no face lies on a 0.1 m voxel
+/// boundary) scanned from (4.03, 3.04, 1.0) by a noise-free lidar: the map's end points,
+/// written with the scan pose into `dir`.
+fn scanned_room(dir: &std::path::Path) -> (olmap::sim::World, olmap::occupancy::OccupancyList) {
+    use nalgebra::{Point3, Vector3};
+    use olmap::sim::{room_shell, Material, Object, RangeNoise, SpinningLidar, World};
+    let objects = room_shell(
+        Point3::new(0.03, 0.04, 0.02),
+        Vector3::new(8.0, 6.0, 3.0),
+        0.1,
+        true,
+    )
+    .into_iter()
+    .enumerate()
+    .map(|(i, shape)| Object {
+        shape,
+        material: Material::WALL,
+        id: i as u32,
+    })
+    .collect();
+    let world = World::new("room", objects);
+    let lidar = SpinningLidar {
+        beams: 241,
+        elevation_min: (-60f64).to_radians(),
+        elevation_max: 60f64.to_radians(),
+        azimuth_step: 0.5f64.to_radians(),
+        noise: RangeNoise::none(),
+    };
+    let pose = room_scan_pose();
+    let cloud = lidar.scan(&world, &[], &pose, 1, 0);
+    let mut map = olmap::occupancy::OccupancyList::new(0.1).unwrap();
+    map.add_points(&cloud, &pose, 1);
+    olmap::occupancy::write_map(dir.join("room.olm"), &map).unwrap();
+    let mut poses = olmap::geometry::PoseList::default();
+    poses.push("scan000", pose);
+    poses.write_path(dir.join("poses.txt")).unwrap();
+    (world, map)
+}
+
+#[test]
+fn render_navgrid_and_query_a_scanned_room() {
+    let dir = tempfile::tempdir().unwrap();
+    let (world, map) = scanned_room(dir.path());
+    let m = dir.path().join("room.olm");
+    let m = m.to_str().unwrap();
+    let voxel_diagonal = 3f64.sqrt() * 0.1;
+    // Top view in a band: the walls' cells drawn, the inside left white (or grid grey).
+    let top = dir.path().join("top.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        top.to_str().unwrap(),
+        "--band",
+        "0.3,2.5",
+        "--json",
+    ]));
+    let img = image::open(&top).unwrap().to_rgb8();
+    assert_eq!(img.width() as u64, v["width"].as_u64().unwrap());
+    let (x0, y1, px) = (
+        v["x_min_m"].as_f64().unwrap(),
+        v["y_max_m"].as_f64().unwrap(),
+        v["pixel_m"].as_f64().unwrap(),
+    );
+    let at = |x: f64, y: f64| {
+        img.get_pixel(((x - x0) / px) as u32, ((y1 - y) / px) as u32)
+            .0
+    };
+    let blank = |p: [u8; 3]| p == [255, 255, 255] || p == [215, 215, 215];
+    for y in [1.05, 3.05, 5.05] {
+        assert!(
+            !blank(at(0.05, y)) && !blank(at(8.05, y)),
+            "walls at y = {y}"
+        );
+    }
+    for (x, y) in [(2.05, 2.05), (4.05, 3.05), (6.55, 4.55)] {
+        assert!(blank(at(x, y)), "inside at ({x}, {y})");
+    }
+    // Depth image: the centre pixel looks along +x from the scan position at the far wall.
+    let depth = dir.path().join("depth.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        depth.to_str().unwrap(),
+        "--view",
+        "depth",
+        "--from",
+        "4.03,3.04,1.0,0",
+        "--size",
+        "41x31",
+        "--fov",
+        "60",
+        "--json",
+    ]));
+    let o = nalgebra::Point3::new(4.03, 3.04, 1.0);
+    let truth = world
+        .cast(&o, &nalgebra::Vector3::x(), 30.0)
+        .unwrap()
+        .distance;
+    let centre = v["centre_range_m"].as_f64().unwrap();
+    assert!(
+        (centre - truth).abs() <= voxel_diagonal,
+        "{centre} vs {truth}"
+    );
+    assert_eq!(image::open(&depth).unwrap().width(), 41);
+    let r = olmap(&[
+        "render",
+        m,
+        "-o",
+        depth.to_str().unwrap(),
+        "--view",
+        "depth",
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--from"));
+    // Overlap surface (Figure 6.6): the room's own scan, searched around a pose 0.36 m off
+    // the truth, peaks at the scan position (within one 0.1 m sample) and heading.
+    let pcd = dir.path().join("scan.pcd");
+    let cloud = scanned_room_cloud(&world);
+    olmap::io::write_cloud(&pcd, &cloud, &Default::default()).unwrap();
+    let heat = dir.path().join("overlap.png");
+    let v = json(&olmap(&[
+        "render",
+        m,
+        "-o",
+        heat.to_str().unwrap(),
+        "--view",
+        "overlap",
+        "--scan",
+        pcd.to_str().unwrap(),
+        "--from",
+        "4.33,2.84,1.0,0",
+        "--half-width",
+        "0.6",
+        "--headings",
+        "12",
+        "--json",
+    ]));
+    let peak = &v["peak"];
+    assert!(
+        (peak["x_m"].as_f64().unwrap() - 4.03).abs() <= 0.1 + 1e-9,
+        "{v}"
+    );
+    assert!(
+        (peak["y_m"].as_f64().unwrap() - 3.04).abs() <= 0.1 + 1e-9,
+        "{v}"
+    );
+    // The scan position is the room's centre: a half turn fits as well as none.
+    let yaw = peak["yaw_deg"].as_f64().unwrap().rem_euclid(180.0);
+    assert!(yaw.min(180.0 - yaw) < 1e-6, "{v}");
+    assert_eq!(image::open(&heat).unwrap().width(), 13 * 4);
+    // Navigation grid: inside free, walls occupied, outside unknown.
+    let pgm = dir.path().join("grid.pgm");
+    let poses = dir.path().join("poses.txt");
+    let v = json(&olmap(&[
+        "navgrid",
+        m,
+        "--poses",
+        poses.to_str().unwrap(),
+        "--band",
+        "0.1,1.2",
+        "-o",
+        pgm.to_str().unwrap(),
+        "--json",
+    ]));
+    let grid = olmap::grid2d::read_ros_map(v["yaml"].as_str().unwrap()).unwrap();
+    use olmap::grid2d::Trinary;
+    let c = |i: i32| (i as f64 + 0.5) * 0.1;
+    for i in 1..=79 {
+        for j in 1..=59 {
+            assert_eq!(grid.at_world(c(i), c(j)), Some(Trinary::Free), "({i}, {j})");
+        }
+    }
+    for j in 0..=60 {
+        assert_eq!(grid.at_world(c(0), c(j)), Some(Trinary::Occupied));
+        assert_eq!(grid.at_world(c(80), c(j)), Some(Trinary::Occupied));
+    }
+    assert_eq!(grid.at_world(c(-1), c(30)), Some(Trinary::Unknown));
+    assert_eq!(v["free"].as_u64().unwrap() as usize, grid.counts().free);
+    // Queries: a ray to the north wall, a wall voxel, free and blocked segments, a radius.
+    let v = json(&olmap(&[
+        "query",
+        m,
+        "--ray",
+        "4.03,3.04,1.0,0,1,0",
+        "--json",
+    ]));
+    let truth = world
+        .cast(&o, &nalgebra::Vector3::y(), 30.0)
+        .unwrap()
+        .distance;
+    let d = v["distance_m"].as_f64().unwrap();
+    assert!((d - truth).abs() <= voxel_diagonal, "{d} vs {truth}");
+    let v = json(&olmap(&["query", m, "--at", "0.05,3.05,1.05", "--json"]));
+    assert_eq!(v["occupied"], true);
+    let v = json(&olmap(&["query", m, "--segment", "2,2,1,6,4,1", "--json"]));
+    assert_eq!(v["free"], true);
+    let v = json(&olmap(&["query", m, "--segment", "2,2,1,9,2,1", "--json"]));
+    assert_eq!(v["free"], false);
+    let v = json(&olmap(&[
+        "query",
+        m,
+        "--radius",
+        "0.05,3.05,1.05,0.3",
+        "--json",
+    ]));
+    let want = map
+        .occupied_within(&nalgebra::Point3::new(0.05, 3.05, 1.05), 0.3)
+        .unwrap()
+        .len();
+    assert!(want > 0);
+    assert_eq!(v["count"].as_u64().unwrap() as usize, want);
+    // One question at a time, and a bad one is refused.
+    assert!(!olmap(&["query", m]).status.success());
+    assert!(!olmap(&["query", m, "--ray", "1,2,3"]).status.success());
+    for cmd in ["render", "navgrid", "query"] {
+        let h = olmap(&[cmd, "--help"]);
+        assert!(h.status.success());
+        assert!(String::from_utf8_lossy(&h.stdout).contains("--json"));
+    }
 }

@@ -45,6 +45,8 @@ pub mod grid2d;
 pub mod io;
 pub mod mapping;
 pub mod occupancy;
+pub mod render;
+pub mod report;
 pub mod scanner;
 pub mod sim;
 pub mod team;

@@ -20,6 +20,10 @@ pub struct ExportArgs {
     /// Keep only voxels with at least this count.
     #[arg(long, default_value_t = 1)]
     pub min_count: u16,
+    /// Point-cloud output: colour the voxel centres by height (blue low, red high) for 3D
+    /// viewers (PLY, PCD keep the colours).
+    #[arg(long)]
+    pub colour_by_height: bool,
 }
 
 /// Runs `olmap export`.
@@ -28,7 +32,12 @@ pub fn export(a: &ExportArgs) -> anyhow::Result<ExitCode> {
     if MapFormat::from_path(&a.output).is_some() {
         occupancy::write_map(&a.output, &map)?;
     } else {
-        io::write_cloud(&a.output, &map.to_cloud(), &WriteOptions::default())?;
+        let cloud = if a.colour_by_height {
+            olmap::render::height_coloured_cloud(&map, None)
+        } else {
+            map.to_cloud()
+        };
+        io::write_cloud(&a.output, &cloud, &WriteOptions::default())?;
     }
     println!("{} voxels -> {}", map.len(), a.output.display());
     Ok(ExitCode::SUCCESS)

@@ -49,7 +49,9 @@ pub struct MapArgs {
     /// from when poses change.
     #[arg(long, value_name = "DIR")]
     pub scans_out: Option<PathBuf>,
-    /// Write a JSON report (placed and rejected scans, reasons, timings).
+    /// Write a JSON report (placed and rejected scans, reasons, timings) and, beside it with
+    /// the extension `.html`, a self-contained HTML report (top view of the map with the
+    /// scan path, map entropy after each scan, tables).
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
     /// Batch (default) or sequential.
@@ -284,6 +286,7 @@ pub fn run_map(a: &MapArgs) -> anyhow::Result<ExitCode> {
         io::write_atomic(path, "JSON report", |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
         })?;
+        write_map_html(&built, scans.len(), a, &report, path)?;
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -386,4 +389,73 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<ExitCode> {
         println!("no reference for: {}", e.missing.join(", "));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The HTML report of `olmap map --report` beside the JSON one.
+fn write_map_html(
+    built: &olmap::mapping::MapBuild,
+    scans: usize,
+    a: &MapArgs,
+    report: &serde_json::Value,
+    json_path: &Path,
+) -> anyhow::Result<()> {
+    use super::html;
+    let mut page = olmap::report::HtmlReport::new("olmap map report");
+    html::parameters(
+        &mut page,
+        &[
+            ("output", a.output.display().to_string()),
+            ("scans", scans.to_string()),
+            ("placed", built.placed.len().to_string()),
+            ("rejected", built.rejected.len().to_string()),
+            ("registrations", built.registrations.to_string()),
+            ("voxels", built.map.len().to_string()),
+            ("resolution (m)", a.resolution.to_string()),
+            ("max range (m)", a.max_range.to_string()),
+            ("mapping time (s)", format!("{:.2}", built.seconds)),
+        ],
+    );
+    page.heading("Map");
+    html::top_view(&mut page, "The map", &built.map, html::paths(built, |_| 0))?;
+    html::entropy(&mut page, built)?;
+    page.heading("Placed scans");
+    let rows: Vec<Vec<String>> = built
+        .placed
+        .iter()
+        .map(|p| {
+            let t = p.pose.translation();
+            vec![
+                p.order.to_string(),
+                p.name.clone(),
+                format!("{:.3}, {:.3}, {:.3}", t.x, t.y, t.z),
+                format!("{:.1}", p.pose.yaw_pitch_roll().0.to_degrees()),
+                format!("{:.3}", p.overlap_fraction),
+                p.via.label().to_string(),
+            ]
+        })
+        .collect();
+    page.table(
+        &[
+            "order",
+            "scan",
+            "x, y, z (m)",
+            "yaw (°)",
+            "overlap",
+            "placed by",
+        ],
+        &rows,
+    );
+    if !built.rejected.is_empty() {
+        page.heading("Rejected scans");
+        let rows: Vec<Vec<String>> = built
+            .rejected
+            .iter()
+            .map(|r| vec![r.name.clone(), r.reasons.join("; ")])
+            .collect();
+        page.table(&["scan", "reasons"], &rows);
+    }
+    page.heading("Report (JSON)");
+    page.json(report);
+    html::write_beside(&page, json_path)?;
+    Ok(())
 }

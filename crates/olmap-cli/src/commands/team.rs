@@ -110,7 +110,7 @@ fn pose_json(p: &Pose) -> Value {
            "pitch_deg": pitch.to_degrees(), "roll_deg": roll.to_degrees()})
 }
 
-/// Writes the joint map as .olm, .ply (voxel centres) and .bt, checking the .olm reads back.
+/// Writes the joint map as .olm, .ply (voxel centres coloured by height) and .bt, checking the .olm reads back.
 fn write_maps(out: &Path, stem: &str, map: &olmap::occupancy::OccupancyList) -> anyhow::Result<()> {
     let olm = out.join(format!("{stem}.olm"));
     occupancy::write_map(&olm, map)?;
@@ -120,9 +120,11 @@ fn write_maps(out: &Path, stem: &str, map: &olmap::occupancy::OccupancyList) -> 
         olm.display()
     );
     occupancy::write_map(out.join(format!("{stem}.bt")), map)?;
+    // Voxel centres coloured by height, counts as intensity: CloudCompare and MeshLab
+    // show the colours.
     io::write_cloud(
         out.join(format!("{stem}.ply")),
-        &map.to_cloud(),
+        &olmap::render::height_coloured_cloud(map, None),
         &WriteOptions::default(),
     )?;
     Ok(())
@@ -232,6 +234,7 @@ pub fn run_pipeline(
         "cleared_points": team.cleared_points,
         "registrations": team.build.registrations,
         "seconds": team.build.seconds,
+        "entropy_after_scan": team.build.entropy_after_scan,
         "voxels": team.build.map.len(),
         "resolution_m": team.build.map.resolution(),
         "frames": frames,
@@ -256,6 +259,7 @@ pub fn run_pipeline(
     io::write_atomic(&path, "JSON", |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
     })?;
+    let html_path = write_html(store, &team, &solo_runs, &report, &path)?;
 
     let mut table = String::new();
     let row = |what: &str, s: &Option<Value>| match s {
@@ -313,9 +317,112 @@ pub fn run_pipeline(
             ));
         }
     }
-    table.push_str(&format!("  written to {} (report.json)\n", out.display()));
+    table.push_str(&format!(
+        "  written to {} (report.json, {})\n",
+        out.display(),
+        html_path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    ));
     Ok(PipelineReport {
         json: report,
         table,
     })
+}
+
+/// The HTML report beside `report.json`: top views of the team map and of every robot's
+/// own map, the error histogram, the entropy per scan, parameters and timings.
+fn write_html(
+    store: &ScanStore,
+    team: &TeamMap,
+    solo_runs: &[(u32, TeamMap, Option<Evaluation>)],
+    report: &Value,
+    json_path: &Path,
+) -> anyhow::Result<std::path::PathBuf> {
+    use super::html;
+    let mut page = olmap::report::HtmlReport::new("olmap team report");
+    let eval = &report["evaluation"];
+    let num = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3}"));
+    html::parameters(
+        &mut page,
+        &[
+            ("scans", store.len().to_string()),
+            ("robots", store.robots().len().to_string()),
+            (
+                "placed in the joint map",
+                team.build.placed.len().to_string(),
+            ),
+            ("registrations", team.build.registrations.to_string()),
+            ("voxels", team.build.map.len().to_string()),
+            ("resolution (m)", team.build.map.resolution().to_string()),
+            (
+                "team mapping time (s)",
+                format!("{:.2}", team.build.seconds),
+            ),
+            (
+                "solo mapping time (s)",
+                format!(
+                    "{:.2}",
+                    solo_runs
+                        .iter()
+                        .map(|(_, m, _)| m.build.seconds)
+                        .sum::<f64>()
+                ),
+            ),
+            (
+                "points of seen robots cleared",
+                team.cleared_points.to_string(),
+            ),
+            (
+                "team mean / median / max error (m)",
+                format!(
+                    "{} / {} / {}",
+                    num(&eval["team"]["mean_m"]),
+                    num(&eval["team"]["median_m"]),
+                    num(&eval["team"]["max_m"])
+                ),
+            ),
+            (
+                "solo mean / median / max error (m)",
+                format!(
+                    "{} / {} / {}",
+                    num(&eval["solo"]["mean_m"]),
+                    num(&eval["solo"]["median_m"]),
+                    num(&eval["solo"]["max_m"])
+                ),
+            ),
+            (
+                "gross errors (> 0.3 m), solo / team",
+                num(&eval["gross_error_ratio_solo_over_team"]),
+            ),
+        ],
+    );
+    page.heading("Team map");
+    let robot_of = |i: usize| team.keys[i].0;
+    html::top_view(
+        &mut page,
+        "The joint map of the team, in the first robot's first scan frame",
+        &team.build.map,
+        html::paths(&team.build, robot_of),
+    )?;
+    if !solo_runs.is_empty() {
+        page.heading("Every robot alone");
+        for (r, m, _) in solo_runs {
+            let caption = format!(
+                "{} mapping alone, in its own first scan's frame",
+                store.robot_name(*r)
+            );
+            html::top_view(
+                &mut page,
+                &caption,
+                &m.build.map,
+                html::paths(&m.build, |_| *r),
+            )?;
+        }
+    }
+    html::error_histogram(&mut page, &eval["team"], &eval["solo"])?;
+    html::entropy(&mut page, &team.build)?;
+    page.heading("Report (report.json)");
+    page.json(report);
+    html::write_beside(&page, json_path)
 }

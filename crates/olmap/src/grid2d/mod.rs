@@ -7,7 +7,9 @@
 //! * [`OccupancyGrid2d::insert_scan_bucketed`] ([`buckets`]): the position-bucket rule, only
 //!   scans from new positions are integrated, whatever the heading;
 //! * [`TrinaryGrid`], [`write_ros_map`] and [`read_ros_map`] ([`ros_map`]): the free /
-//!   occupied / unknown map of ROS `map_saver` and `map_server`.
+//!   occupied / unknown map of ROS `map_saver` and `map_server`;
+//! * [`navigation_grid`] ([`navigation`]): the free / occupied / unknown grid a planner needs,
+//!   from a 3D occupancy list and its scan poses (thesis §7.3).
 //!
 //! ```
 //! use olmap::cloud::LaserScan;
@@ -38,11 +40,13 @@
 
 pub mod buckets;
 pub mod grid;
+pub mod navigation;
 pub mod raytrace;
 pub mod ros_map;
 pub mod sensor_model;
 
 pub use grid::{CellCounts, InsertStats, OccupancyGrid2d};
+pub use navigation::{navigation_grid, NavGridParams};
 pub use raytrace::{bresenham, Bresenham};
 pub use ros_map::{read_ros_map, write_ros_map, Thresholds, Trinary, TrinaryGrid};
 pub use sensor_model::SensorModel2d;

@@ -3,7 +3,8 @@
 //! * [`OccupancyList`]: voxel key -> count, only positive counts stored; built from clouds
 //!   (endpoints) or by ray tracing scans ([`OccupancyList::insert_scan`], thesis
 //!   Algorithm 2 with exact voxel traversal [`VoxelRay`]);
-//! * queries, filters, merging, transforms, statistics and map entropy (thesis (7.4));
+//! * queries ([`OccupancyList::cast_ray`], [`OccupancyList::segment_is_free`],
+//!   [`OccupancyList::occupied_within`]), filters, merging, transforms, statistics and map entropy (thesis (7.4));
 //! * [`PositionBuckets`] (thesis §3.3.3): integrate scans from new positions only;
 //! * downsampling (thesis Algorithm 4) and the incremental [`Pyramid`];
 //! * overlap of a scan with a map (thesis (5.7)), plain and weighted;
@@ -20,6 +21,7 @@ mod olm;
 mod overlap;
 mod packed;
 mod pyramid;
+mod query;
 mod raytrace;
 mod table;
 
@@ -29,4 +31,5 @@ pub use list::{OccupancyList, OccupancyStats};
 pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
+pub use query::RayHit;
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};

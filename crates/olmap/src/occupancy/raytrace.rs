@@ -35,6 +35,8 @@ pub struct VoxelRay {
     t_delta: [f64; 3],
     remaining: [u64; 3],
     started: bool,
+    /// Segment parameter (0 at `start`, 1 at `end`) where the last returned voxel was entered.
+    t_entry: f64,
 }
 
 impl VoxelRay {
@@ -48,6 +50,7 @@ impl VoxelRay {
             t_delta: [f64::INFINITY; 3],
             remaining: [0; 3],
             started: true,
+            t_entry: 0.0,
         };
         let s = start.coords / resolution;
         let e = end.coords / resolution;
@@ -82,6 +85,13 @@ impl VoxelRay {
         VoxelKey::new(self.key[0] as i32, self.key[1] as i32, self.key[2] as i32)
     }
 
+    /// Where along the segment the voxel last returned by the iterator was entered, as a
+    /// fraction of the segment (0 for the first voxel, the one holding `start`): the
+    /// distance from `start` to that voxel's boundary is `entry() * |end - start|`.
+    pub fn entry(&self) -> f64 {
+        self.t_entry
+    }
+
     /// Voxels left to visit, including the current one if not yet returned.
     pub fn remaining(&self) -> u64 {
         self.remaining.iter().sum::<u64>() + u64::from(!self.started)
@@ -110,6 +120,7 @@ impl Iterator for VoxelRay {
             return None;
         }
         self.key[axis] += self.step[axis];
+        self.t_entry = best;
         self.t_max[axis] += self.t_delta[axis];
         self.remaining[axis] -= 1;
         Some(self.current())

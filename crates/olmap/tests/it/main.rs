@@ -11,6 +11,7 @@ mod mapping;
 mod mutual;
 mod occupancy;
 mod real_data;
+mod render;
 mod round_trip;
 mod scanner;
 mod sim_robots;

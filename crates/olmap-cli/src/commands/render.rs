@@ -1,0 +1,457 @@
+//! `olmap render`, `olmap navgrid` and `olmap query`: pictures of a map, the navigation
+//! grid a planner needs (thesis §7.3), and point, ray, radius and segment queries.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{ArgGroup, Args, ValueEnum};
+use nalgebra::{Point3, Vector3};
+use olmap::geometry::{Pose, PoseList};
+use olmap::grid2d::{navigation_grid, write_ros_map, NavGridParams};
+use olmap::occupancy::{self, OccupancyList};
+use olmap::render::{
+    overlap_surface, render_depth, render_top_view, write_png, Camera, OverlapSurfaceParams,
+    TopViewOptions,
+};
+use serde_json::json;
+
+use crate::args::parse_numbers;
+
+/// Views `olmap render` draws.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ViewArg {
+    /// From above, voxels coloured by height.
+    Top,
+    /// A depth image from a viewpoint (--from), near light and far dark.
+    Depth,
+    /// The overlap surface of a scan (--scan) around a pose (--from): the best-heading
+    /// overlap over x, y as a heat map (thesis Figure 6.6).
+    Overlap,
+}
+
+/// Cameras of the depth view.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum CameraArg {
+    /// A pinhole camera; --fov is horizontal.
+    Pinhole,
+    /// A full-turn cylindrical panorama; --fov is vertical.
+    Panoramic,
+}
+
+/// Arguments of `olmap render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    /// The map (.olm or OctoMap .bt).
+    pub map: PathBuf,
+    /// Output PNG image.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// What to draw.
+    #[arg(long, value_enum, default_value = "top")]
+    pub view: ViewArg,
+    /// Viewpoint of the depth view, or centre of the overlap surface: x,y,z (m) and yaw
+    /// (degrees), level.
+    #[arg(long, value_name = "X,Y,Z,YAW", allow_hyphen_values = true)]
+    pub from: Option<String>,
+    /// Camera of the depth view.
+    #[arg(long, value_enum, default_value = "pinhole")]
+    pub camera: CameraArg,
+    /// Field of view of the depth view, degrees (pinhole: horizontal; panoramic: vertical).
+    #[arg(long, default_value_t = 90.0)]
+    pub fov: f64,
+    /// Size of the depth image, WIDTHxHEIGHT pixels (default 640x480, panoramic 1440x360).
+    #[arg(long, value_name = "WxH")]
+    pub size: Option<String>,
+    /// Top view: only voxels with centres between these heights, metres (e.g. 2.3,2.9, the
+    /// thesis' structure band).
+    #[arg(long, value_name = "ZMIN,ZMAX", allow_hyphen_values = true)]
+    pub band: Option<String>,
+    /// Top view: grid line spacing in metres (0: no grid).
+    #[arg(long, default_value_t = 1.0)]
+    pub grid: f64,
+    /// Top view: metres per pixel (default: the map's resolution).
+    #[arg(long)]
+    pub pixel: Option<f64>,
+    /// Top view: a pose list whose positions are drawn as a path.
+    #[arg(long, value_name = "FILE")]
+    pub poses: Option<PathBuf>,
+    /// Overlap view: the scan (any point-cloud format, its own frame), voxelised at the
+    /// map's resolution.
+    #[arg(long, value_name = "FILE")]
+    pub scan: Option<PathBuf>,
+    /// Overlap view: the surface covers the centre ± this many metres in x and y.
+    #[arg(long, default_value_t = 2.0)]
+    pub half_width: f64,
+    /// Overlap view: headings tried per position (evenly over the full turn).
+    #[arg(long, default_value_t = 36)]
+    pub headings: u32,
+    /// Only voxels with at least this count.
+    #[arg(long, default_value_t = 1)]
+    pub min_count: u16,
+    /// Depth view: rays reach at most this far, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_range: f64,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_band(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
+    let [lo, hi] = parse_numbers::<2>(s, what)?;
+    if lo > hi {
+        bail!("{what}: ZMIN must not be above ZMAX, got {s}");
+    }
+    Ok((lo, hi))
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size: expected WIDTHxHEIGHT, got '{s}'"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size: bad width in '{s}'"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size: bad height in '{s}'"))?;
+    Ok((w, h))
+}
+
+fn read(path: &PathBuf) -> anyhow::Result<OccupancyList> {
+    Ok(occupancy::read_map(path)?.map)
+}
+
+/// Runs `olmap render`.
+pub fn run_render(a: &RenderArgs) -> anyhow::Result<ExitCode> {
+    let map = read(&a.map)?;
+    let summary = match a.view {
+        ViewArg::Top => {
+            let poses = match &a.poses {
+                Some(p) => PoseList::read_path(p)?,
+                None => PoseList::default(),
+            };
+            let path: Vec<Point3<f64>> = poses
+                .poses
+                .iter()
+                .map(|p| Point3::from(p.pose.translation()))
+                .collect();
+            let options = TopViewOptions {
+                pixel_size: a.pixel,
+                band: a
+                    .band
+                    .as_deref()
+                    .map(|s| parse_band(s, "--band"))
+                    .transpose()?,
+                grid_step: (a.grid > 0.0).then_some(a.grid),
+                positions: path.clone(),
+                paths: if path.len() > 1 {
+                    vec![path]
+                } else {
+                    Vec::new()
+                },
+                min_count: a.min_count,
+                ..TopViewOptions::default()
+            };
+            let view = render_top_view(&map, &options)?;
+            write_png(&a.output, &view.image)?;
+            json!({"output": a.output.display().to_string(), "view": "top",
+                   "width": view.image.width(), "height": view.image.height(),
+                   "columns": view.columns, "x_min_m": view.x_min, "y_max_m": view.y_max,
+                   "pixel_m": view.pixel_size, "z_range_m": [view.z_range.0, view.z_range.1]})
+        }
+        ViewArg::Depth => {
+            let from = a
+                .from
+                .as_deref()
+                .context("--view depth needs --from X,Y,Z,YAW")?;
+            let [x, y, z, yaw] = parse_numbers::<4>(from, "--from")?;
+            let pose = Pose::from_xyz_ypr(x, y, z, yaw.to_radians(), 0.0, 0.0);
+            let fov = a.fov.to_radians();
+            let camera = match a.camera {
+                CameraArg::Pinhole => {
+                    let (width, height) = a
+                        .size
+                        .as_deref()
+                        .map(parse_size)
+                        .transpose()?
+                        .unwrap_or((640, 480));
+                    Camera::Pinhole {
+                        width,
+                        height,
+                        fov_x: fov,
+                    }
+                }
+                CameraArg::Panoramic => {
+                    let (width, height) = a
+                        .size
+                        .as_deref()
+                        .map(parse_size)
+                        .transpose()?
+                        .unwrap_or((1440, 360));
+                    Camera::Panoramic {
+                        width,
+                        height,
+                        fov_y: fov,
+                    }
+                }
+            };
+            let depth = render_depth(&map, &pose, &camera, a.max_range, a.min_count)?;
+            write_png(&a.output, &depth.to_image())?;
+            let (w, h) = camera.size();
+            json!({"output": a.output.display().to_string(), "view": "depth",
+                   "width": w, "height": h, "hits": depth.hits(),
+                   "centre_range_m": depth.range(w / 2, h / 2)})
+        }
+        ViewArg::Overlap => {
+            let scan_path = a
+                .scan
+                .as_ref()
+                .context("--view overlap needs --scan FILE")?;
+            let from = a
+                .from
+                .as_deref()
+                .context("--view overlap needs --from X,Y,Z,YAW (the surface's centre)")?;
+            let [x, y, z, yaw] = parse_numbers::<4>(from, "--from")?;
+            let cloud = olmap::io::read_cloud(scan_path)?.cloud;
+            let scan = OccupancyList::from_cloud(&cloud, map.resolution())?;
+            let params = OverlapSurfaceParams {
+                half_width: a.half_width,
+                stride: 1,
+                headings: a.headings,
+            };
+            let centre = Pose::from_xyz_ypr(x, y, z, yaw.to_radians(), 0.0, 0.0);
+            let surface = overlap_surface(&map.threshold(a.min_count), &scan, &centre, &params)?;
+            let img = surface.to_image(4);
+            write_png(&a.output, &img)?;
+            let (px, py, pyaw, best) = surface.peak();
+            json!({"output": a.output.display().to_string(), "view": "overlap",
+                   "width": img.width(), "height": img.height(), "samples_per_side": surface.n,
+                   "step_m": surface.step, "x0_m": surface.x0, "y0_m": surface.y0,
+                   "scan_voxels": scan.len(),
+                   "peak": {"x_m": px, "y_m": py, "yaw_deg": pyaw.to_degrees(), "overlap": best}})
+        }
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "{} view {} x {} -> {}",
+            summary["view"].as_str().unwrap_or(""),
+            summary["width"],
+            summary["height"],
+            a.output.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Arguments of `olmap navgrid`.
+#[derive(Args)]
+pub struct NavgridArgs {
+    /// The map (.olm or OctoMap .bt).
+    pub map: PathBuf,
+    /// The scan poses (pose list, e.g. written by `olmap map --poses-out`): rays are traced
+    /// from their positions.
+    #[arg(long, value_name = "FILE")]
+    pub poses: PathBuf,
+    /// The robot-height band, metres: voxels with centres in it are obstacles.
+    #[arg(
+        long,
+        value_name = "ZMIN,ZMAX",
+        default_value = "0.1,1.2",
+        allow_hyphen_values = true
+    )]
+    pub band: String,
+    /// Output PGM image (the ROS map_server YAML is written beside it).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Cell size, metres (default: the map's resolution).
+    #[arg(long)]
+    pub resolution: Option<f64>,
+    /// Rays from a scan position reach at most this far, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_range: f64,
+    /// Only voxels with at least this count are obstacles.
+    #[arg(long, default_value_t = 1)]
+    pub min_count: u16,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `olmap navgrid`.
+pub fn run_navgrid(a: &NavgridArgs) -> anyhow::Result<ExitCode> {
+    let map = read(&a.map)?;
+    let poses: Vec<Pose> = PoseList::read_path(&a.poses)?
+        .poses
+        .iter()
+        .map(|p| p.pose)
+        .collect();
+    let params = NavGridParams {
+        resolution: a.resolution,
+        band: parse_band(&a.band, "--band")?,
+        max_range: a.max_range,
+        min_count: a.min_count,
+        ..NavGridParams::default()
+    };
+    let grid = navigation_grid(&map, &poses, &params)?;
+    if grid.width == 0 {
+        bail!(
+            "{}: no voxel in the band and no pose: nothing to grid",
+            a.map.display()
+        );
+    }
+    let yaml = write_ros_map(&a.output, &grid)?;
+    let c = grid.counts();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({
+                "pgm": a.output.display().to_string(), "yaml": yaml.display().to_string(),
+                "width": grid.width, "height": grid.height, "resolution_m": grid.resolution,
+                "origin": grid.origin, "poses": poses.len(),
+                "free": c.free, "occupied": c.occupied, "unknown": c.unknown}))?
+        );
+    } else {
+        println!(
+            "{} x {} cells at {} m from {} poses: {} free, {} occupied, {} unknown -> {} + {}",
+            grid.width,
+            grid.height,
+            grid.resolution,
+            poses.len(),
+            c.free,
+            c.occupied,
+            c.unknown,
+            a.output.display(),
+            yaml.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Arguments of `olmap query`.
+#[derive(Args)]
+#[command(group(ArgGroup::new("what").required(true).args(["at", "ray", "radius", "segment"])))]
+pub struct QueryArgs {
+    /// The map (.olm or OctoMap .bt).
+    pub map: PathBuf,
+    /// Is the voxel holding this point occupied? X,Y,Z (m).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub at: Option<String>,
+    /// The first occupied voxel along a ray from X,Y,Z in direction DX,DY,DZ, and its
+    /// distance.
+    #[arg(long, value_name = "X,Y,Z,DX,DY,DZ", allow_hyphen_values = true)]
+    pub ray: Option<String>,
+    /// The occupied voxels whose centres lie within R metres of X,Y,Z.
+    #[arg(long, value_name = "X,Y,Z,R", allow_hyphen_values = true)]
+    pub radius: Option<String>,
+    /// Is the segment between two points free of occupied voxels?
+    #[arg(long, value_name = "X1,Y1,Z1,X2,Y2,Z2", allow_hyphen_values = true)]
+    pub segment: Option<String>,
+    /// Rays reach at most this far, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_range: f64,
+    /// Only voxels with at least this count count as occupied.
+    #[arg(long, default_value_t = 1)]
+    pub min_count: u16,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `olmap query`.
+pub fn run_query(a: &QueryArgs) -> anyhow::Result<ExitCode> {
+    let map = read(&a.map)?;
+    let r = map.resolution();
+    let key_json = |k: olmap::geometry::VoxelKey| {
+        let c = map.center(k);
+        json!({"key": [k.x, k.y, k.z], "center": [c.x, c.y, c.z], "count": map.count(k)})
+    };
+    let (value, text) = if let Some(s) = &a.at {
+        let [x, y, z] = parse_numbers::<3>(s, "--at")?;
+        let p = Point3::new(x, y, z);
+        let count = map.count_at(&p);
+        let occupied = count >= a.min_count.max(1);
+        (
+            json!({"query": "at", "point": [x, y, z], "occupied": occupied, "count": count}),
+            format!(
+                "({x}, {y}, {z}): {} (count {count})",
+                if occupied {
+                    "occupied"
+                } else {
+                    "free or unknown"
+                }
+            ),
+        )
+    } else if let Some(s) = &a.ray {
+        let [x, y, z, dx, dy, dz] = parse_numbers::<6>(s, "--ray")?;
+        let hit = map.cast_ray(
+            &Point3::new(x, y, z),
+            &Vector3::new(dx, dy, dz),
+            a.max_range,
+            a.min_count,
+        )?;
+        match hit {
+            Some(h) => (
+                json!({"query": "ray", "hit": true, "distance_m": h.distance,
+                       "point": [h.point.x, h.point.y, h.point.z], "voxel": key_json(h.key)}),
+                format!(
+                    "hit at {:.3} m: voxel {:?} centred at {:?} (count {}), accurate to one voxel ({r} m)",
+                    h.distance, [h.key.x, h.key.y, h.key.z], map.center(h.key).coords.as_slice(), h.count
+                ),
+            ),
+            None => (
+                json!({"query": "ray", "hit": false, "max_range_m": a.max_range}),
+                format!("no occupied voxel within {} m", a.max_range),
+            ),
+        }
+    } else if let Some(s) = &a.radius {
+        let [x, y, z, rad] = parse_numbers::<4>(s, "--radius")?;
+        let near: Vec<_> = map
+            .occupied_within(&Point3::new(x, y, z), rad)?
+            .into_iter()
+            .filter(|(_, c)| *c >= a.min_count.max(1))
+            .collect();
+        let mut text = format!(
+            "{} occupied voxels within {rad} m of ({x}, {y}, {z})",
+            near.len()
+        );
+        for (k, c) in near.iter().take(20) {
+            let p = map.center(*k);
+            text.push_str(&format!(
+                "\n  ({:.3}, {:.3}, {:.3}) count {c}",
+                p.x, p.y, p.z
+            ));
+        }
+        if near.len() > 20 {
+            text.push_str("\n  ...");
+        }
+        (
+            json!({"query": "radius", "center": [x, y, z], "radius_m": rad, "count": near.len(),
+                   "voxels": near.iter().map(|(k, _)| key_json(*k)).collect::<Vec<_>>()}),
+            text,
+        )
+    } else if let Some(s) = &a.segment {
+        let [x1, y1, z1, x2, y2, z2] = parse_numbers::<6>(s, "--segment")?;
+        let free = map.segment_is_free(
+            &Point3::new(x1, y1, z1),
+            &Point3::new(x2, y2, z2),
+            a.min_count,
+        )?;
+        (
+            json!({"query": "segment", "from": [x1, y1, z1], "to": [x2, y2, z2], "free": free}),
+            format!("segment {}", if free { "free" } else { "blocked" }),
+        )
+    } else {
+        bail!("give one of --at, --ray, --radius, --segment");
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        println!("{text}");
+    }
+    Ok(ExitCode::SUCCESS)
+}
