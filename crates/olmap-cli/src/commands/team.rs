@@ -343,6 +343,10 @@ fn write_html(
     let mut page = olmap::report::HtmlReport::new("olmap team report");
     let eval = &report["evaluation"];
     let num = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3}"));
+    let percent = |v: &Value| {
+        v.as_f64()
+            .map_or("-".to_string(), |x| format!("{:.1}", 100.0 * x))
+    };
     html::parameters(
         &mut page,
         &[
@@ -392,7 +396,16 @@ fn write_html(
                 ),
             ),
             (
+                "scans off by more than 0.3 m, team / solo (%)",
+                format!(
+                    "{} / {}",
+                    percent(&eval["team"]["share_above_0.3_m"]),
+                    percent(&eval["solo"]["share_above_0.3_m"])
+                ),
+            ),
+            (
                 "gross errors (> 0.3 m), solo / team",
+                // No ratio when the team has no gross error.
                 num(&eval["gross_error_ratio_solo_over_team"]),
             ),
         ],
