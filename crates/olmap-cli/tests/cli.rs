@@ -1155,3 +1155,55 @@ fn render_navgrid_and_query_a_scanned_room() {
         assert!(String::from_utf8_lossy(&h.stdout).contains("--json"));
     }
 }
+
+/// A map as a Rerun recording: with the `rerun` feature an `.rrd` file (Rerun's RRF2
+/// framing) is written; without it the export is refused with a message naming the
+/// feature, and nothing is written.
+#[test]
+fn export_rrd_writes_a_rerun_recording_or_names_the_feature() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut map = olmap::occupancy::OccupancyList::new(0.1).unwrap();
+    for i in 0..20 {
+        let p = nalgebra::Point3::new(0.05 + 0.1 * i as f64, 0.05, 0.05 * i as f64);
+        map.set(map.key_of(&p).unwrap(), 3).unwrap();
+    }
+    let olm = dir.path().join("map.olm");
+    map.write_olm_path(&olm).unwrap();
+    let poses = dir.path().join("poses.txt");
+    std::fs::write(
+        &poses,
+        "robot0/scan000 1 0 0 0 0 1 0 0 0 0 1 0\nrobot0/scan001 1 0 0 1 0 1 0 0 0 0 1 0\n",
+    )
+    .unwrap();
+    let rrd = dir.path().join("map.rrd");
+    let out = olmap(&[
+        "export",
+        olm.to_str().unwrap(),
+        "-o",
+        rrd.to_str().unwrap(),
+        "--poses",
+        poses.to_str().unwrap(),
+    ]);
+    if cfg!(feature = "rerun") {
+        assert!(out.status.success(), "{out:?}");
+        let bytes = std::fs::read(&rrd).unwrap();
+        assert_eq!(&bytes[..4], b"RRF2");
+        assert!(bytes.len() > 20 * 12, "{} bytes for 20 voxels", bytes.len());
+    } else {
+        assert!(!out.status.success());
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--features rerun"));
+        assert!(!rrd.exists());
+    }
+    // --poses only means something in a recording.
+    let ply = dir.path().join("map.ply");
+    let out = olmap(&[
+        "export",
+        olm.to_str().unwrap(),
+        "-o",
+        ply.to_str().unwrap(),
+        "--poses",
+        poses.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(!ply.exists());
+}

@@ -13,6 +13,7 @@ pub mod mapping;
 pub mod mutual;
 pub mod poses;
 pub mod render;
+pub mod rrd;
 pub mod scanner;
 pub mod simulate;
 pub mod team;
