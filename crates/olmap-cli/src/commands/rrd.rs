@@ -56,7 +56,6 @@ pub fn write_rrd(path: &Path, map: &OccupancyList, poses: Option<&PoseList>) -> 
                 .with_radii([0.1f32]),
         )?;
         let mut robots: Vec<&str> = poses.poses.iter().map(|p| robot_of(&p.name)).collect();
-        robots.dedup();
         robots.sort_unstable();
         robots.dedup();
         for robot in robots {

@@ -821,11 +821,11 @@ pub fn build_map_linked(
                 voxels,
             });
         }
-        if params.bucket_radius > 0.0 && !buckets.admit(&p.pose.transform_point(&cloud.origin())) {
-            entropy_after_scan.push(map.entropy(0.5, Some(0.0), 1.0)?);
-            continue;
+        let admitted =
+            params.bucket_radius <= 0.0 || buckets.admit(&p.pose.transform_point(&cloud.origin()));
+        if admitted {
+            map.insert_scan(cloud, &p.pose, &params.sensor)?;
         }
-        map.insert_scan(cloud, &p.pose, &params.sensor)?;
         entropy_after_scan.push(map.entropy(0.5, Some(0.0), 1.0)?);
     }
     if params.min_count > 1 {
