@@ -229,7 +229,7 @@ fn localisation(quick: bool) -> anyhow::Result<Vec<Value>> {
     } else {
         (b.map.clone(), b.params.clone())
     };
-    // The exact search is left out: at 0.02 m it scores most leaves (README).
+    // The exact search is left out: at 0.02 m its proof takes minutes (README).
     let mode = SearchMode::MultiResolution;
     let params = RegisterParams {
         search: SearchParams {

@@ -89,6 +89,12 @@ impl DenseGrid {
         Some(g)
     }
 
+    /// The bits: cell `(x, y, z)` of the box is bit `((x - lo.x) * dy + (y - lo.y)) * dz +
+    /// (z - lo.z)` (dims `[dx, dy, dz]` from [`DenseGrid::bounds`]), little endian.
+    pub fn words(&self) -> &[u64] {
+        &self.bits
+    }
+
     /// Marks a cell (ignored outside the box).
     #[inline]
     pub fn set(&mut self, x: i64, y: i64, z: i64) {
@@ -120,25 +126,6 @@ impl DenseGrid {
     pub fn contains(&self, x: i64, y: i64, z: i64) -> bool {
         self.index(x, y, z)
             .is_some_and(|i| self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1)
-    }
-
-    /// Calls `f(x, y, z)` for every set cell.
-    pub fn for_each_set(&self, mut f: impl FnMut(i64, i64, i64)) {
-        let plane = self.dims[1] * self.dims[2];
-        for (w, &word) in self.bits.iter().enumerate() {
-            let mut bits = word;
-            while bits != 0 {
-                let i = w as u64 * 64 + bits.trailing_zeros() as u64;
-                bits &= bits - 1;
-                let (x, rest) = (i / plane, i % plane);
-                let (y, z) = (rest / self.dims[2], rest % self.dims[2]);
-                f(
-                    self.min[0] + x as i64,
-                    self.min[1] + y as i64,
-                    self.min[2] + z as i64,
-                );
-            }
-        }
     }
 
     /// Bytes held.

@@ -10,6 +10,7 @@ mod search;
 mod significance;
 mod target;
 
+pub use bnb::EXACT_MAX_AMBIGUITY;
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,

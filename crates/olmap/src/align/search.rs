@@ -99,9 +99,13 @@ pub struct Alignment {
     /// Wall time of the whole search, seconds.
     pub seconds: f64,
     /// Whether the result is guaranteed: the best pose of the finest lattice over the whole
-    /// region, with `ambiguity` and `candidates` those of [`exhaustive_search`]. Set by the
-    /// exact search ([`super::SearchMode::Exact`]) and the exhaustive search; the
-    /// multi-resolution search prunes heuristically and sets it false.
+    /// region, with `ambiguity` and `candidates` those of [`exhaustive_search`] (the exact
+    /// search counts clusters up to [`super::EXACT_MAX_AMBIGUITY`]). Set by the exact search
+    /// ([`super::SearchMode::Exact`]) and the exhaustive search; the multi-resolution
+    /// search prunes heuristically and sets it false. Its resampling can also step a few
+    /// cells or angular steps past the region's ends, outside this lattice (a global
+    /// search's heading index past `2π / dθ`), and there score a little higher than the
+    /// exact optimum.
     pub exact: bool,
 }
 

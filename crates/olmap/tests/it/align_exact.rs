@@ -1,7 +1,8 @@
 //! The exact (branch-and-bound) search against the exhaustive search (Algorithm 7) on
 //! small problems: every degree-of-freedom set, windows and the whole target, with and
 //! without free space. The exact search must return the exhaustive search's result: the
-//! same best score and pose, the same ambiguity and candidates.
+//! same best score and pose, the same ambiguity (up to
+//! [`align::EXACT_MAX_AMBIGUITY`]) and candidates.
 
 use olmap::align::{self, Alignment, Dof, Region, SearchMode, SearchParams, SearchTarget};
 use olmap::geometry::Pose;
@@ -16,7 +17,11 @@ fn same(exact: &Alignment, sure: &Alignment, what: &str) {
         sure.pose.to_row_major_3x4(),
         "{what}: best pose"
     );
-    assert_eq!(exact.ambiguity, sure.ambiguity, "{what}: ambiguity");
+    assert_eq!(
+        exact.ambiguity,
+        sure.ambiguity.min(align::EXACT_MAX_AMBIGUITY),
+        "{what}: ambiguity (counted up to the cap)"
+    );
     assert_eq!(exact.candidates, sure.candidates, "{what}: candidates");
 }
 
@@ -118,11 +123,23 @@ fn exact_equals_exhaustive_over_the_whole_target() {
     let exact = align::global_search(&source, &target, &params).unwrap();
     let sure = align::exhaustive_search(&source, &target, &params).unwrap();
     same(&exact, &sure, "whole target, every heading");
+    // This room is very ambiguous (30 clusters); each cluster is a further pass. With one
+    // neighbourhood holding every pose, one pass finds the optimum and the second starts
+    // with nothing left: the pruning alone must bound fewer nodes than there are poses.
+    let one = SearchParams {
+        ambiguity_distance: 100.0,
+        ambiguity_angle: std::f64::consts::PI,
+        ..params.clone()
+    };
+    let exact_one = align::global_search(&source, &target, &one).unwrap();
+    let sure_one = align::exhaustive_search(&source, &target, &one).unwrap();
+    same(&exact_one, &sure_one, "whole target, one cluster");
+    assert_eq!(exact_one.ambiguity, 1);
     assert!(
-        exact.evaluated < sure.evaluated,
-        "branch and bound bounds fewer nodes ({}) than there are poses ({})",
-        exact.evaluated,
-        sure.evaluated
+        exact_one.evaluated < sure_one.evaluated / 2,
+        "branch and bound bounds fewer nodes ({}) than half the poses ({})",
+        exact_one.evaluated,
+        sure_one.evaluated
     );
     // The multi-resolution search is not guaranteed, and never beats the optimum.
     let fast = align::global_search(
@@ -136,4 +153,34 @@ fn exact_equals_exhaustive_over_the_whole_target() {
     .unwrap();
     assert!(!fast.exact);
     assert!(fast.score <= exact.score);
+}
+
+/// The whole target in x, y, z and heading at a resolution fine enough for the bound grids
+/// to sample their windows every 2 or 4 cells at the coarse levels.
+#[test]
+fn exact_equals_exhaustive_in_3d_over_the_whole_target() {
+    let pts = olmap::fixtures::furnished_room(0.05);
+    let t_room_target = Pose::from_xyz_ypr(5.0, 4.0, 1.2, -0.7, 0.0, 0.0);
+    let motion = Pose::from_xyz_ypr(-0.6, 0.7, 0.1, 1.1, 0.0, 0.0);
+    let range = 5.0;
+    let target = olmap::fixtures::scan_of(&pts, &t_room_target, range);
+    let source = olmap::fixtures::scan_of(&pts, &(t_room_target * motion), range);
+    let params = SearchParams {
+        resolution: 0.2,
+        levels: 5,
+        dof: Dof::XyzYaw,
+        region: Region::Global,
+        max_scan_voxels: 250,
+        max_range: range,
+        search: SearchMode::Exact,
+        ..Default::default()
+    };
+    let target = SearchTarget::from_cloud(&target, params.resolution, params.levels).unwrap();
+    let exact = align::global_search(&source, &target, &params).unwrap();
+    let sure = align::exhaustive_search(&source, &target, &params).unwrap();
+    eprintln!(
+        "3d whole: exact {} ({} nodes), exhaustive {} ({} poses)",
+        exact.score, exact.evaluated, sure.score, sure.evaluated
+    );
+    same(&exact, &sure, "whole target in 3D");
 }
