@@ -1,7 +1,13 @@
 //! A dense bit grid over a map level's bounding box: membership in one array read.
 
-use crate::geometry::VoxelKey;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
 use crate::occupancy::OccupancyList;
+
+/// Items per task of [`DenseGrid::par_set`].
+const PAR_SET_CHUNK: usize = 2048;
 
 /// Occupied cells of an occupancy list as bits over its bounding box of keys, for
 /// lookups without hashing (the search's inner loop). Built only when the box is small
@@ -19,6 +25,12 @@ impl DenseGrid {
 
     /// The grid of a list, or `None` when it is empty or its box is too large.
     pub fn new(list: &OccupancyList) -> Option<Self> {
+        let (lo, hi) = Self::key_box(list)?;
+        Self::over(list, lo, hi)
+    }
+
+    /// The smallest key box `[lo, hi]` holding every voxel of a list (`None` when empty).
+    pub fn key_box(list: &OccupancyList) -> Option<([i64; 3], [i64; 3])> {
         let mut lo = [i64::MAX; 3];
         let mut hi = [i64::MIN; 3];
         for (k, _) in list.iter() {
@@ -27,9 +39,12 @@ impl DenseGrid {
                 hi[i] = hi[i].max(v as i64);
             }
         }
-        if list.is_empty() {
-            return None;
-        }
+        (!list.is_empty()).then_some((lo, hi))
+    }
+
+    /// The voxels of a list over the key box `[lo, hi]` (voxels outside it are left out),
+    /// or `None` when the box is too large.
+    pub fn over(list: &OccupancyList, lo: [i64; 3], hi: [i64; 3]) -> Option<Self> {
         let mut g = Self::empty(lo, hi)?;
         for (k, _) in list.iter() {
             g.set(k.x as i64, k.y as i64, k.z as i64);
@@ -95,6 +110,11 @@ impl DenseGrid {
         &self.bits
     }
 
+    /// The bits, laid out as [`DenseGrid::words`] describes.
+    pub fn into_words(self) -> Vec<u64> {
+        self.bits
+    }
+
     /// Marks a cell (ignored outside the box).
     #[inline]
     pub fn set(&mut self, x: i64, y: i64, z: i64) {
@@ -128,6 +148,25 @@ impl DenseGrid {
             .is_some_and(|i| self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1)
     }
 
+    /// Sets cells from several threads at once: `visit` runs for every item of `items` in
+    /// parallel and marks cells through the [`SharedCells`] it is given.
+    pub fn par_set<T: Sync>(&mut self, items: &[T], visit: impl Fn(&[T], &SharedCells) + Sync) {
+        let words: Vec<AtomicU64> = std::mem::take(&mut self.bits)
+            .into_iter()
+            .map(AtomicU64::new)
+            .collect();
+        let shared = SharedCells { grid: self, words };
+        items
+            .par_chunks(PAR_SET_CHUNK)
+            .for_each(|chunk| visit(chunk, &shared));
+        let bits = shared
+            .words
+            .into_iter()
+            .map(AtomicU64::into_inner)
+            .collect();
+        self.bits = bits;
+    }
+
     /// Bytes held.
     #[allow(dead_code)]
     pub fn memory_bytes(&self) -> usize {
@@ -135,30 +174,23 @@ impl DenseGrid {
     }
 }
 
-/// Membership test of a map level: dense bits when they fit, else the hash table.
-pub(crate) enum LevelLookup<'a> {
-    Dense(DenseGrid),
-    Hashed(&'a OccupancyList),
+/// A [`DenseGrid`] that many threads mark at once ([`DenseGrid::par_set`]).
+pub(crate) struct SharedCells<'a> {
+    grid: &'a DenseGrid,
+    words: Vec<AtomicU64>,
 }
 
-impl<'a> LevelLookup<'a> {
-    pub fn new(list: &'a OccupancyList) -> Self {
-        match DenseGrid::new(list) {
-            Some(g) => LevelLookup::Dense(g),
-            None => LevelLookup::Hashed(list),
-        }
-    }
-
+impl SharedCells<'_> {
+    /// Marks a cell (ignored outside the box). A cell already marked costs a plain read:
+    /// rays share the cells near their origin, and an atomic write there would make the
+    /// threads fight over those cache lines.
     #[inline]
-    pub fn contains(&self, x: i64, y: i64, z: i64) -> bool {
-        match self {
-            LevelLookup::Dense(g) => g.contains(x, y, z),
-            LevelLookup::Hashed(l) => {
-                let ok = |v: i64| i32::try_from(v).ok();
-                match (ok(x), ok(y), ok(z)) {
-                    (Some(x), Some(y), Some(z)) => l.count(VoxelKey::new(x, y, z)) > 0,
-                    _ => false,
-                }
+    pub fn set(&self, x: i64, y: i64, z: i64) {
+        if let Some(i) = self.grid.index(x, y, z) {
+            let word = &self.words[(i / 64) as usize];
+            let bit = 1 << (i % 64);
+            if word.load(Ordering::Relaxed) & bit == 0 {
+                word.fetch_or(bit, Ordering::Relaxed);
             }
         }
     }

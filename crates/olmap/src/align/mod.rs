@@ -2,10 +2,12 @@
 //! refinement.
 
 mod bnb;
+mod cells;
 mod dense;
 pub mod icp;
 mod params;
 mod register;
+mod rows;
 mod search;
 mod significance;
 mod target;

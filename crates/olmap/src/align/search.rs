@@ -8,23 +8,27 @@
 //! its resampling (Algorithm 6: ±half a cell, ±dθ) is `(2i + {-1, 0, 1}, 2j + {-1, 0, 1})`.
 //! Poses sharing a rotation are evaluated together: the scan's voxel centres are rotated
 //! once, `floor((R c + t0) / cell)` is computed once, and every translation of the group
-//! is an integer offset of those keys (§5.3.3). Groups run in parallel; every ordering
+//! is an integer offset of those keys (§5.3.3): a chunk of translations per pass over the
+//! scan ([`CellGrid`]), or, when they fill a box (the coarsest level of a global search),
+//! the whole box at once as a correlation of rows ([`RowGrid`]). Groups run in parallel; every ordering
 //! and tie is resolved by the pose indices, so the result is the same for any number of
 //! threads.
 
-use std::collections::BTreeMap;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::dense::{DenseGrid, LevelLookup};
+use super::cells::CellGrid;
+use super::dense::DenseGrid;
 use super::params::{Dof, Locus, Region, SearchMode, SearchParams};
+use super::rows::RowGrid;
 use super::significance::significance;
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::geometry::Pose;
+use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::{OccupancyList, Pyramid};
 
 /// One pose of the lattice: rotation indices (yaw, pitch, roll) and translation indices.
@@ -166,7 +170,13 @@ impl Lattice {
 pub(super) struct Problem<'a> {
     /// Scan voxel centres per level (sensor frame).
     pub(super) scan: Vec<Vec<Point3<f64>>>,
-    maps: Vec<LevelLookup<'a>>,
+    /// Per level: the dense cells, or `None` when the box is too large (the hash table of
+    /// `levels` and the free grid answer instead).
+    cells: Vec<Option<CellGrid>>,
+    /// Per level, built when first needed: the cells as rows for scoring boxes of
+    /// translations.
+    rows: Vec<OnceLock<Option<RowGrid>>>,
+    levels: Vec<&'a OccupancyList>,
     pub(super) free: Vec<Option<&'a DenseGrid>>,
     pub(super) lattice: Lattice,
     /// Finest-level target voxels and bounding volume in cells.
@@ -294,13 +304,16 @@ pub(super) fn prepare<'a>(
         searched_t: [true, true, search_z],
         searched_r: [true, tilt.is_some(), tilt.is_some()],
     };
-    let maps = (0..pyramid.levels())
-        .map(|l| LevelLookup::new(pyramid.level(l)))
+    let cells = (0..pyramid.levels())
+        .into_par_iter()
+        .map(|l| CellGrid::new(pyramid.level(l), target.free[l].as_ref()))
         .collect();
     let e = bbox.extent();
     Ok(Problem {
         scan,
-        maps,
+        cells,
+        rows: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
+        levels: (0..pyramid.levels()).map(|l| pyramid.level(l)).collect(),
         free: target.free.iter().map(Option::as_ref).collect(),
         lattice,
         map_voxels: pyramid.base().len() as u64,
@@ -326,17 +339,34 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
     let l = &problem.lattice;
     let cell = l.cell(level);
     let scan = &problem.scan[level];
-    let map = &problem.maps[level];
+    let cells = problem.cells[level].as_ref();
+    let map = problem.levels[level];
     let free = problem.free[level];
-    // Group by rotation (sorted: deterministic).
-    let mut groups: BTreeMap<[i32; 3], Vec<[i32; 3]>> = BTreeMap::new();
-    for c in cands {
-        groups.entry(c.r).or_default().push(c.t);
-    }
-    let groups: Vec<([i32; 3], Vec<[i32; 3]>)> = groups.into_iter().collect();
+    // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.
+    let sorted;
+    let cands = if cands.is_sorted() {
+        cands
+    } else {
+        sorted = {
+            let mut v = cands.to_vec();
+            v.sort_unstable();
+            v
+        };
+        &sorted
+    };
+    let groups: Vec<([i32; 3], Vec<[i32; 3]>)> = cands
+        .chunk_by(|a, b| a.r == b.r)
+        .map(|g| (g[0].r, g.iter().map(|c| c.t).collect()))
+        .collect();
+    let boxes: Vec<Option<TranslationBox>> = groups.iter().map(|(_, ts)| dense_box(ts)).collect();
+    let rows = match (cells, boxes.iter().any(Option::is_some)) {
+        (Some(c), true) => problem.rows[level].get_or_init(|| RowGrid::new(c)).as_ref(),
+        _ => None,
+    };
     let scored: Vec<Vec<Scored>> = groups
         .par_iter()
-        .map(|(r, ts)| {
+        .zip(&boxes)
+        .map(|((r, ts), bx)| {
             let probe = Cand {
                 r: *r,
                 t: [0, 0, 0],
@@ -344,37 +374,28 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
             let [yaw, pitch, roll] = l.angles(&probe, level);
             let rot = crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll);
             let base: Vec<[i64; 3]> = scan.iter().map(|c| key_of(&rot, c, l.t0, cell)).collect();
+            let by_box = rows
+                .zip(bx.as_ref())
+                .and_then(|(g, b)| Some((g.score_box(&base, b.lo, b.n)?, b.lo)));
+            let counts: Vec<(u32, u32)> = match (by_box, cells) {
+                (Some((scores, lo)), _) => ts
+                    .iter()
+                    .map(|t| scores.get([0, 1, 2].map(|i| (t[i] as i64 - lo[i]) as usize)))
+                    .collect(),
+                (None, Some(g)) => g.score(&base, ts),
+                (None, None) => ts
+                    .iter()
+                    .map(|t| count_hashed(&base, *t, map, free))
+                    .collect(),
+            };
             ts.iter()
-                .map(|t| {
-                    let d = [t[0] as i64, t[1] as i64, t[2] as i64];
-                    // One loop per lookup kind: no dispatch per voxel.
-                    let (hits, conflicts) = match (map, free) {
-                        (LevelLookup::Dense(g), None) => count(
-                            &base,
-                            d,
-                            |x, y, z| g.contains(x, y, z),
-                            None::<fn(i64, i64, i64) -> bool>,
-                        ),
-                        (LevelLookup::Dense(g), Some(f)) => count(
-                            &base,
-                            d,
-                            |x, y, z| g.contains(x, y, z),
-                            Some(|x, y, z| f.contains(x, y, z)),
-                        ),
-                        (m, None) => count(
-                            &base,
-                            d,
-                            |x, y, z| m.contains(x, y, z),
-                            None::<fn(i64, i64, i64) -> bool>,
-                        ),
-                        (m, Some(f)) => count(
-                            &base,
-                            d,
-                            |x, y, z| m.contains(x, y, z),
-                            Some(|x, y, z| f.contains(x, y, z)),
-                        ),
-                    };
-                    (2 * hits as i64 - conflicts, hits, Cand { r: *r, t: *t })
+                .zip(counts)
+                .map(|(t, (hits, conflicts))| {
+                    (
+                        2 * hits as i64 - conflicts as i64,
+                        hits,
+                        Cand { r: *r, t: *t },
+                    )
                 })
                 .collect()
         })
@@ -382,21 +403,53 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
     scored.into_iter().flatten().collect()
 }
 
-/// Hits and conflicts of the keys moved by `d`.
-#[inline(always)]
-fn count(
+/// The translations of a rotation group as a box: its first corner and size.
+struct TranslationBox {
+    lo: [i64; 3],
+    n: [usize; 3],
+}
+
+/// The bounding box of a group's translations when scoring the whole box beats scoring them
+/// one by one: enough of them ([`MIN_BOX_POSES`]), filling at least half the box.
+fn dense_box(ts: &[[i32; 3]]) -> Option<TranslationBox> {
+    if ts.len() < MIN_BOX_POSES {
+        return None;
+    }
+    let mut lo = [i64::MAX; 3];
+    let mut hi = [i64::MIN; 3];
+    for t in ts {
+        for i in 0..3 {
+            lo[i] = lo[i].min(t[i] as i64);
+            hi[i] = hi[i].max(t[i] as i64);
+        }
+    }
+    let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
+    (n[0] * n[1] * n[2] <= 2 * ts.len()).then_some(TranslationBox { lo, n })
+}
+
+/// The fewest poses of one rotation scored as a box.
+const MIN_BOX_POSES: usize = 64;
+
+/// Hits and conflicts of the keys moved by `t`, looked up in the hash table (for levels too
+/// large for [`CellGrid`]).
+fn count_hashed(
     base: &[[i64; 3]],
-    d: [i64; 3],
-    occupied: impl Fn(i64, i64, i64) -> bool,
-    free: Option<impl Fn(i64, i64, i64) -> bool>,
-) -> (u32, i64) {
-    let (mut hits, mut conflicts) = (0u32, 0i64);
+    t: [i32; 3],
+    map: &OccupancyList,
+    free: Option<&DenseGrid>,
+) -> (u32, u32) {
+    let (mut hits, mut conflicts) = (0u32, 0u32);
+    let key = |v: i64| i32::try_from(v).ok();
     for b in base {
-        let (x, y, z) = (b[0] + d[0], b[1] + d[1], b[2] + d[2]);
-        if occupied(x, y, z) {
+        let (x, y, z) = (b[0] + t[0] as i64, b[1] + t[1] as i64, b[2] + t[2] as i64);
+        let occupied = match (key(x), key(y), key(z)) {
+            (Some(x), Some(y), Some(z)) => map.count(VoxelKey::new(x, y, z)) > 0,
+            _ => false,
+        };
+        if occupied {
             hits += 1;
-        } else if let Some(f) = &free {
-            conflicts += f(x, y, z) as i64;
+        } else if free.is_some_and(|f| f.contains(x, y, z)) {
+            conflicts += 1;
         }
     }
     (hits, conflicts)
@@ -425,8 +478,8 @@ pub(super) fn threshold(best: i64, keep_ratio: f64) -> i64 {
     best - ((1.0 - keep_ratio) * best.abs() as f64).floor() as i64
 }
 
-/// Evaluates and ranks the candidates of a level: the ranked scores, the best pose's hits,
-/// and how many poses pass the keep ratio.
+/// Evaluates the candidates of a level and ranks the ones within `keep_ratio` of the best:
+/// those poses, best first, the best pose's hits, and how many poses were evaluated.
 fn score_level(
     problem: &Problem,
     cands: &[Cand],
@@ -434,11 +487,15 @@ fn score_level(
     keep_ratio: f64,
 ) -> (Vec<Scored>, u32, usize) {
     let mut scored = evaluate(problem, cands, level);
-    rank(&mut scored);
-    let (best, best_hits) = scored.first().map_or((0, 0), |s| (s.0, s.1));
+    let evaluated = scored.len();
+    let best = scored.iter().map(|s| s.0).max().unwrap_or(0);
     let cut = threshold(best, keep_ratio);
-    let passed = scored.iter().take_while(|s| s.0 >= cut).count();
-    (scored, best_hits, passed)
+    // Only the poses that pass are ranked: at the coarsest level they are a few hundred
+    // of a few hundred thousand.
+    scored.retain(|s| s.0 >= cut);
+    rank(&mut scored);
+    let best_hits = scored.first().map_or(0, |s| s.1);
+    (scored, best_hits, evaluated)
 }
 
 /// Best first; ties by lattice index (deterministic).
@@ -559,32 +616,21 @@ pub fn global_search(
             Region::Locus(_) if level > 0 => params.keep_ratio.min(LOCUS_KEEP_RATIO),
             _ => params.keep_ratio,
         };
-        let (scored, best_hits, passed) = score_level(&problem, &cands, level, keep);
+        let (scored, best_hits, evaluated) = score_level(&problem, &cands, level, keep);
+        let passed = scored.len();
         if best_hits == 0 {
-            reports.push(level_report(&problem, level, scored.len(), passed, 0, 0, t));
+            reports.push(level_report(&problem, level, evaluated, passed, 0, 0, t));
             return Ok(no_overlap(&problem, reports, start));
         }
         if level == 0 {
             reports.push(level_report(
-                &problem,
-                level,
-                scored.len(),
-                passed,
-                passed,
-                best_hits,
-                t,
+                &problem, level, evaluated, passed, passed, best_hits, t,
             ));
             return Ok(finish(&problem, params, &scored, reports, start));
         }
         let survivors = passed.min(params.survivor_cap());
         reports.push(level_report(
-            &problem,
-            level,
-            scored.len(),
-            passed,
-            survivors,
-            best_hits,
-            t,
+            &problem, level, evaluated, passed, survivors, best_hits, t,
         ));
         let mut next = Vec::with_capacity(survivors * 27);
         for (_, _, c) in &scored[..survivors] {
@@ -749,15 +795,10 @@ pub fn exhaustive_search(
     let problem = prepare(source, target, params)?;
     let t = Instant::now();
     let cands = initial_candidates(&problem, params, &target.pyramid, 0);
-    let (scored, best_hits, passed) = score_level(&problem, &cands, 0, params.keep_ratio);
+    let (scored, best_hits, evaluated) = score_level(&problem, &cands, 0, params.keep_ratio);
+    let passed = scored.len();
     let reports = vec![level_report(
-        &problem,
-        0,
-        scored.len(),
-        passed,
-        passed,
-        best_hits,
-        t,
+        &problem, 0, evaluated, passed, passed, best_hits, t,
     )];
     if best_hits == 0 {
         return Ok(no_overlap(&problem, reports, start));

@@ -1,7 +1,5 @@
 //! What a search aligns against: a map pyramid, and the free space seen by its scans.
 
-use rayon::prelude::*;
-
 use super::dense::DenseGrid;
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -112,24 +110,15 @@ fn add_free_space(
         Some(g) => g.grown(lo, hi)?,
         None => DenseGrid::empty(lo, hi)?,
     };
-    let keys: Vec<Vec<[i64; 3]>> = moved
-        .points()
-        .par_chunks(4096)
-        .map(|pts| {
-            let mut out = Vec::new();
-            for p in pts {
-                let ray = VoxelRay::new(&origin, &p.cast(), cell);
-                let n = ray.remaining() as usize;
-                for k in ray.take(n.saturating_sub(skip)) {
-                    out.push([k.x as i64, k.y as i64, k.z as i64]);
-                }
+    grid.par_set(moved.points(), |pts, cells| {
+        for p in pts {
+            let ray = VoxelRay::new(&origin, &p.cast(), cell);
+            let n = ray.remaining() as usize;
+            for k in ray.take(n.saturating_sub(skip)) {
+                cells.set(k.x as i64, k.y as i64, k.z as i64);
             }
-            out
-        })
-        .collect();
-    for k in keys.iter().flatten() {
-        grid.set(k[0], k[1], k[2]);
-    }
+        }
+    });
     // Occupied cells (of every scan so far) are never free.
     for (k, _) in level.iter() {
         grid.clear(k.x as i64, k.y as i64, k.z as i64);
