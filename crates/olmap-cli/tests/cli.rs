@@ -818,6 +818,7 @@ fn scanner_convert_and_repeatability_of_a_simulated_raw_log() {
 #[test]
 fn bench_quick_json_reports_every_measure() {
     let v = json(&olmap(&["bench", "--quick", "--json", "--threads", "2"]));
+    assert_eq!(v["repeat"], 1, "--quick runs each measure once");
     let num = |x: &serde_json::Value, what: &str| {
         x.as_f64()
             .unwrap_or_else(|| panic!("{what} is a number: {x}"))
@@ -831,6 +832,7 @@ fn bench_quick_json_reports_every_measure() {
         assert!(!rows.is_empty(), "{section}");
         for r in rows {
             assert!(num(&r["seconds"], "seconds") > 0.0, "{section}: {r}");
+            assert!(num(&r["total_seconds"], "total") > 0.0, "{section}: {r}");
             assert!(num(&r["translation_error_m"], "error").is_finite(), "{r}");
             assert!(num(&r["rotation_error_deg"], "error").is_finite(), "{r}");
         }

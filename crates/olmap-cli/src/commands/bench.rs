@@ -31,6 +31,10 @@ pub struct BenchArgs {
     /// Largest thread count of the scaling run (default: all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Runs of every timed measure; the median is reported (default: 5, 1 with --quick).
+    /// A 2-core machine varies by 10-30 % from run to run.
+    #[arg(long)]
+    pub repeat: Option<usize>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -105,6 +109,32 @@ fn alignment_pair(a: &BenchArgs) -> anyhow::Result<Pair> {
     })
 }
 
+/// The median of some timings.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// Runs `f` `repeat` times: its last result, and the median of the seconds it reports.
+fn repeated<T>(
+    repeat: usize,
+    mut f: impl FnMut() -> anyhow::Result<(T, f64)>,
+) -> anyhow::Result<(T, f64)> {
+    let mut times = Vec::with_capacity(repeat);
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let (v, s) = f()?;
+        times.push(s);
+        last = Some(v);
+    }
+    let last = last.ok_or_else(|| anyhow::anyhow!("no run"))?;
+    Ok((last, median(times)))
+}
+
 fn errors(e: &PoseError) -> Value {
     json!({"translation_error_m": e.translation_m, "rotation_error_deg": e.rotation_deg})
 }
@@ -117,7 +147,7 @@ fn peak_memory() -> Option<u64> {
     Some(kb * 1024)
 }
 
-fn insertion(quick: bool) -> anyhow::Result<Value> {
+fn insertion(quick: bool, repeat: usize) -> anyhow::Result<Value> {
     let world = olmap::sim::office(5);
     let scanner = olmap::sim::MirrorScanner::enhanced();
     let sensor = olmap::sim::RobotModel::default().sensor_pose();
@@ -128,25 +158,28 @@ fn insertion(quick: bool) -> anyhow::Result<Value> {
             (scanner.scan(&world, &[], &pose, 5, i as u64), pose)
         })
         .collect();
-    let mut map = OccupancyList::new(0.05)?;
     let model = SensorModel {
         max_range: 8.0,
         ..Default::default()
     };
-    let t = Instant::now();
-    let mut points = 0;
-    for (cloud, pose) in &scans {
-        map.insert_scan(cloud, pose, &model)?;
-        points += cloud.len();
-    }
-    let s = t.elapsed().as_secs_f64();
+    let points: usize = scans.iter().map(|(c, _)| c.len()).sum();
+    let (map, s) = repeated(repeat, || {
+        let mut map = OccupancyList::new(0.05)?;
+        let t = Instant::now();
+        for (cloud, pose) in &scans {
+            map.insert_scan(cloud, pose, &model)?;
+        }
+        Ok((map, t.elapsed().as_secs_f64()))
+    })?;
     Ok(
         json!({"resolution": 0.05, "points": points, "seconds": s, "points_per_second": points as f64 / s,
               "map_voxels": map.len()}),
     )
 }
 
-fn register(p: &Pair, mode: SearchMode) -> anyhow::Result<(align::Registration, PoseError)> {
+/// Registers the pair: the result, its error, and the seconds of the whole call (target
+/// preparation and search).
+fn register(p: &Pair, mode: SearchMode) -> anyhow::Result<(align::Registration, PoseError, f64)> {
     let params = RegisterParams {
         search: SearchParams {
             search: mode,
@@ -155,21 +188,29 @@ fn register(p: &Pair, mode: SearchMode) -> anyhow::Result<(align::Registration, 
         refine: None,
         trust: Default::default(),
     };
+    let t = Instant::now();
     let r = align::register(&p.source, &p.target, &params)?;
+    let total = t.elapsed().as_secs_f64();
     let e = PoseError::between(&r.pose, &p.truth);
-    Ok((r, e))
+    Ok((r, e, total))
 }
 
-fn alignment(p: &Pair) -> anyhow::Result<(Value, Value)> {
-    let (r, e) = register(p, SearchMode::MultiResolution)?;
+fn alignment(p: &Pair, repeat: usize) -> anyhow::Result<(Value, Value)> {
+    let mode = SearchMode::MultiResolution;
+    let ((r, e), search) = repeated(repeat, || {
+        let (r, e, _) = register(p, mode)?;
+        let s = r.search.seconds;
+        Ok(((r, e), s))
+    })?;
+    let (_, total) = repeated(repeat, || Ok(((), register(p, mode)?.2)))?;
     let s = &r.search;
     // Overlap evaluations: poses scored, and voxel lookups (poses x scan voxels).
     let lookups: usize = s.levels.iter().map(|l| l.evaluated * l.scan_voxels).sum();
-    let overlap = json!({"poses_per_second": s.evaluated as f64 / s.seconds,
-                         "voxel_lookups_per_second": lookups as f64 / s.seconds});
-    let mut row = json!({"name": p.name, "mode": mode_name(SearchMode::MultiResolution), "seconds": s.seconds,
-                         "evaluated": s.evaluated, "score": s.score, "overlap_fraction": s.overlap_fraction,
-                         "exact": s.exact});
+    let overlap = json!({"poses_per_second": s.evaluated as f64 / search,
+                         "voxel_lookups_per_second": lookups as f64 / search});
+    let mut row = json!({"name": p.name, "mode": mode_name(mode), "seconds": search,
+                         "total_seconds": total, "evaluated": s.evaluated, "score": s.score,
+                         "overlap_fraction": s.overlap_fraction, "exact": s.exact});
     merge(&mut row, errors(&e));
     Ok((row, overlap))
 }
@@ -177,7 +218,7 @@ fn alignment(p: &Pair) -> anyhow::Result<(Value, Value)> {
 /// Both search modes (and the exhaustive search) on a problem small enough for the exact
 /// one: a simulated room scan against another over the whole target, every heading, at
 /// 0.3 m (larger problems: see README).
-fn modes() -> anyhow::Result<Vec<Value>> {
+fn modes(repeat: usize) -> anyhow::Result<Vec<Value>> {
     let pts = olmap::fixtures::furnished_room(0.05);
     let t_target = Pose::from_xyz_ypr(6.0, 4.5, 1.2, 0.4, 0.0, 0.0);
     let motion = Pose::from_xyz_ypr(0.9, -0.4, 0.0, 2.0, 0.0, 0.0);
@@ -199,14 +240,24 @@ fn modes() -> anyhow::Result<Vec<Value>> {
             search: mode,
             ..base.clone()
         };
-        let a = align::global_search(&source, &target, &params)?;
-        let mut row = json!({"name": "sim_room_0.3m", "mode": mode_name(mode), "seconds": a.seconds,
+        let (a, seconds) = repeated(repeat, || {
+            let a = align::global_search(&source, &target, &params)?;
+            let s = a.seconds;
+            Ok((a, s))
+        })?;
+        let mut row = json!({"name": "sim_room_0.3m", "mode": mode_name(mode), "seconds": seconds,
+                             "total_seconds": seconds,
                              "evaluated": a.evaluated, "score": a.score, "exact": a.exact});
         merge(&mut row, errors(&PoseError::between(&a.pose, &motion)));
         rows.push(row);
     }
-    let a = align::exhaustive_search(&source, &target, &base)?;
-    let mut row = json!({"name": "sim_room_0.3m", "mode": "exhaustive", "seconds": a.seconds,
+    let (a, seconds) = repeated(repeat, || {
+        let a = align::exhaustive_search(&source, &target, &base)?;
+        let s = a.seconds;
+        Ok((a, s))
+    })?;
+    let mut row = json!({"name": "sim_room_0.3m", "mode": "exhaustive", "seconds": seconds,
+                         "total_seconds": seconds,
                          "evaluated": a.evaluated, "score": a.score, "exact": a.exact});
     merge(&mut row, errors(&PoseError::between(&a.pose, &motion)));
     rows.push(row);
@@ -219,7 +270,7 @@ fn merge(a: &mut Value, b: Value) {
     }
 }
 
-fn localisation(quick: bool) -> anyhow::Result<Vec<Value>> {
+fn localisation(quick: bool, repeat: usize) -> anyhow::Result<Vec<Value>> {
     let b = olmap::sim::thesis_localisation(7, 16)?;
     let (map, params) = if quick {
         let coarse = b.map.downsample(2)?;
@@ -239,17 +290,24 @@ fn localisation(quick: bool) -> anyhow::Result<Vec<Value>> {
         refine: None,
         trust: Default::default(),
     };
-    let r = align::localize(&b.scan, &map, &params)?;
+    let mut totals = Vec::new();
+    let (r, search) = repeated(repeat, || {
+        let t = Instant::now();
+        let r = align::localize(&b.scan, &map, &params)?;
+        totals.push(t.elapsed().as_secs_f64());
+        let s = r.search.seconds;
+        Ok((r, s))
+    })?;
     let e = PoseError::between(&r.pose, &b.truth);
     let mut row = json!({"name": if quick { "thesis_quick" } else { "thesis" }, "mode": mode_name(mode),
-                         "seconds": r.search.seconds, "evaluated": r.search.evaluated, "score": r.search.score,
+                         "seconds": search, "total_seconds": median(totals), "evaluated": r.search.evaluated, "score": r.search.score,
                          "resolution": map.resolution(), "map_voxels": map.len(),
                          "scan_voxels": r.search.scan_voxels, "area_m2": b.area_m2, "exact": r.search.exact});
     merge(&mut row, errors(&e));
     Ok(vec![row])
 }
 
-fn mapping(quick: bool) -> anyhow::Result<Value> {
+fn mapping(quick: bool, repeat: usize) -> anyhow::Result<Value> {
     let world = olmap::fixtures::hall(0.15);
     let n = if quick { 4 } else { 10 };
     let scans: Vec<ScanInput> = olmap::fixtures::hall_trajectory(n, 0.9)
@@ -261,15 +319,17 @@ fn mapping(quick: bool) -> anyhow::Result<Value> {
             odometry: None,
         })
         .collect();
-    let t = Instant::now();
-    let m = build_map(&scans, &MapParams::default(), |_, _| {})?;
-    let s = t.elapsed().as_secs_f64();
+    let (m, s) = repeated(repeat, || {
+        let t = Instant::now();
+        let m = build_map(&scans, &MapParams::default(), |_, _| {})?;
+        Ok((m, t.elapsed().as_secs_f64()))
+    })?;
     Ok(
         json!({"scans": n, "seconds": s, "seconds_per_scan": s / n as f64, "map_voxels": m.map.len()}),
     )
 }
 
-fn scaling(p: &Pair, max_threads: usize) -> anyhow::Result<Vec<Value>> {
+fn scaling(p: &Pair, max_threads: usize, repeat: usize) -> anyhow::Result<Vec<Value>> {
     let mut counts = vec![1];
     while counts.last().copied().unwrap_or(1) * 2 <= max_threads {
         counts.push(counts.last().copied().unwrap_or(1) * 2);
@@ -281,8 +341,10 @@ fn scaling(p: &Pair, max_threads: usize) -> anyhow::Result<Vec<Value>> {
     let mut base = None;
     for n in counts {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build()?;
-        let (r, _) = pool.install(|| register(p, SearchMode::MultiResolution))?;
-        let s = r.search.seconds;
+        let (_, s) = repeated(repeat, || {
+            let (r, _, _) = pool.install(|| register(p, SearchMode::MultiResolution))?;
+            Ok(((), r.search.seconds))
+        })?;
         let b = *base.get_or_insert(s);
         rows.push(json!({"threads": n, "seconds": s, "speedup": b / s}));
     }
@@ -296,18 +358,19 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     } else {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     };
+    let repeat = a.repeat.unwrap_or(if a.quick { 1 } else { 5 }).max(1);
     let bar = progress(6, "bench", a.json);
-    let modes = modes()?;
-    let insertion = insertion(a.quick)?;
+    let modes = modes(repeat)?;
+    let insertion = insertion(a.quick, repeat)?;
     bar.inc(1);
     let pair = alignment_pair(a)?;
-    let (alignment, overlap) = alignment(&pair)?;
+    let (alignment, overlap) = alignment(&pair, repeat)?;
     bar.inc(1);
-    let localisation = localisation(a.quick)?;
+    let localisation = localisation(a.quick, repeat)?;
     bar.inc(1);
-    let mapping = mapping(a.quick)?;
+    let mapping = mapping(a.quick, repeat)?;
     bar.inc(1);
-    let threads = scaling(&pair, max_threads)?;
+    let threads = scaling(&pair, max_threads, repeat)?;
     bar.inc(1);
     bar.finish_and_clear();
     let ratio = |rows: &[Value]| {
@@ -323,6 +386,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     };
     let v = json!({
         "quick": a.quick,
+        "repeat": repeat,
         "insertion": insertion,
         "overlap": overlap,
         "alignment": [alignment],
@@ -343,6 +407,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
 
 fn print_table(v: &Value) {
     let f = |x: &Value| x.as_f64().unwrap_or(f64::NAN);
+    println!("(timings: the median of {} runs)", v["repeat"]);
     let i = &v["insertion"];
     println!(
         "insertion (ray traced, {} m)   {:>12.0} points/s ({} points in {:.3} s)",
@@ -358,8 +423,8 @@ fn print_table(v: &Value) {
         f(&o["voxel_lookups_per_second"])
     );
     println!(
-        "{:<14} {:<9} {:>9} {:>10} {:>9} {:>9} {:>12}",
-        "problem", "mode", "seconds", "score", "err m", "err deg", "evaluated"
+        "{:<14} {:<10} {:>9} {:>9} {:>7} {:>8} {:>8} {:>10}",
+        "problem", "mode", "search s", "total s", "score", "err m", "err deg", "evaluated"
     );
     for r in v["alignment"]
         .as_array()
@@ -369,14 +434,15 @@ fn print_table(v: &Value) {
         .flatten()
     {
         println!(
-            "{:<14} {:<9} {:>9.3} {:>10} {:>9.3} {:>9.2} {:>12}",
+            "{:<14} {:<10} {:>9.4} {:>9.4} {:>7} {:>8.3} {:>8.2} {:>10}",
             r["name"].as_str().unwrap_or(""),
             r["mode"].as_str().unwrap_or(""),
             f(&r["seconds"]),
-            r["score"],
+            f(&r["total_seconds"]),
+            r["score"].to_string(),
             f(&r["translation_error_m"]),
             f(&r["rotation_error_deg"]),
-            r["evaluated"]
+            r["evaluated"].to_string()
         );
     }
     println!(

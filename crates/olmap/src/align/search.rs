@@ -170,9 +170,9 @@ impl Lattice {
 pub(super) struct Problem<'a> {
     /// Scan voxel centres per level (sensor frame).
     pub(super) scan: Vec<Vec<Point3<f64>>>,
-    /// Per level: the dense cells, or `None` when the box is too large (the hash table of
-    /// `levels` and the free grid answer instead).
-    cells: Vec<Option<CellGrid>>,
+    /// Per level, built when first needed: the dense cells, or `None` when the box is too
+    /// large (the hash table of `levels` and the free grid answer instead).
+    cells: Vec<OnceLock<Option<CellGrid>>>,
     /// Per level, built when first needed: the cells as rows for scoring boxes of
     /// translations.
     rows: Vec<OnceLock<Option<RowGrid>>>,
@@ -304,14 +304,10 @@ pub(super) fn prepare<'a>(
         searched_t: [true, true, search_z],
         searched_r: [true, tilt.is_some(), tilt.is_some()],
     };
-    let cells = (0..pyramid.levels())
-        .into_par_iter()
-        .map(|l| CellGrid::new(pyramid.level(l), target.free[l].as_ref()))
-        .collect();
     let e = bbox.extent();
     Ok(Problem {
         scan,
-        cells,
+        cells: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
         rows: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
         levels: (0..pyramid.levels()).map(|l| pyramid.level(l)).collect(),
         free: target.free.iter().map(Option::as_ref).collect(),
@@ -339,7 +335,9 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
     let l = &problem.lattice;
     let cell = l.cell(level);
     let scan = &problem.scan[level];
-    let cells = problem.cells[level].as_ref();
+    let cells = problem.cells[level]
+        .get_or_init(|| CellGrid::new(problem.levels[level], problem.free[level]))
+        .as_ref();
     let map = problem.levels[level];
     let free = problem.free[level];
     // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.

@@ -167,9 +167,6 @@ fn suffix_sums(vals: &[i8], out: &mut Vec<i64>) {
     }
 }
 
-/// A pose found: score, hits, pose indices.
-type Found = Scored;
-
 /// A child kept for expansion: bound, rotation block, translation block, values slot.
 type Kid = (i64, [i32; 3], [i32; 3], usize);
 
@@ -186,9 +183,9 @@ struct Worker {
     order: Vec<Vec<u32>>,
     /// The children of one rotation being bounded.
     live: Vec<Child>,
-    /// A root's per-voxel values.
+    /// The per-voxel values of the roots of one rotation block.
     root_vals: Vec<i8>,
-    best: Option<Found>,
+    best: Option<Scored>,
     bounded: Vec<usize>,
     passed: Vec<usize>,
 }
@@ -201,6 +198,24 @@ struct Child {
     sum: i64,
     hits: u32,
     slot: usize,
+}
+
+/// Half the width of a rotation block of level `r`, in finest angular steps: the block
+/// covers `2^r` steps, and its centre is this far from its first and last.
+fn half_steps(r: u32) -> f64 {
+    ((1u64 << r) - 1) as f64 / 2.0
+}
+
+impl Child {
+    fn new(t: [i32; 3], offset: [i64; 3], slot: usize) -> Self {
+        Child {
+            t,
+            offset,
+            sum: 0,
+            hits: 0,
+            slot,
+        }
+    }
 }
 
 /// Voxels summed between two tests of the cut.
@@ -236,14 +251,14 @@ struct Pass<'a> {
 impl Bnb<'_> {
     /// Half the angular width of a rotation block of level `r`, per searched axis.
     fn half_width(&self, r: u32) -> f64 {
-        ((1u64 << r) - 1) as f64 / 2.0 * self.lattice.dtheta(0)
+        half_steps(r) * self.lattice.dtheta(0)
     }
 
     /// The rotation at the centre of block `rb` of level `r`.
     fn centre(&self, rb: [i32; 3], r: u32) -> Rotation3<f64> {
         let l = self.lattice;
         let d = l.dtheta(0);
-        let h = ((1u64 << r) - 1) as f64 / 2.0;
+        let h = half_steps(r);
         let a = [0, 1, 2].map(|i| {
             let steps = ((rb[i] as i64) << r) as f64 + if self.searched_r[i] { h } else { 0.0 };
             l.angle0[i] + steps * d
@@ -286,50 +301,54 @@ impl Bnb<'_> {
         })
     }
 
-    /// The bound (the score at level 0) of translation block `tb` for the keys of a
-    /// rotation block, with its hits; `None` once it cannot reach `cut`.
+    /// Bounds (scores at level 0) of the translation blocks `live` at `level`, for the
+    /// keys of one rotation block, a chunk of voxels at a time for all of them together:
+    /// their windows are neighbours in the grids.
     ///
     /// `parent` holds the per-voxel values of the parent node (upper bounds for every pose
-    /// of this node too) and `rest[i]` the sum of `parent[i..]`: a voxel's value is the
-    /// smaller of its own and its parent's, and the evaluation stops as soon as what is
-    /// summed plus the parent's values of the voxels left falls below `cut`. The values are
-    /// written to `out` (when given).
-    #[inline]
+    /// below it too) and `rest[i]` the sum of `parent` over `order[i..]`. A voxel's value is
+    /// the smaller of its own and its parent's; voxels are read in `order`, and a block is
+    /// dropped as soon as what it has summed plus the parent's values of the voxels left
+    /// falls below `cut()`. Each block's values go to `buf[slot * n..]`.
     #[allow(clippy::too_many_arguments)]
-    fn bound(
+    fn bound_children(
         &self,
-        keys: &[[i64; 3]],
         level: u32,
-        tb: [i32; 3],
+        keys: &[[i64; 3]],
+        order: &[u32],
         parent: &[i8],
         rest: &[i64],
-        cut: i64,
-        mut out: Option<&mut [i8]>,
-    ) -> Option<(i64, u32)> {
+        live: &mut Vec<Child>,
+        buf: &mut [i8],
+        cut: impl Fn() -> i64,
+    ) {
         let lv = &self.levels[level as usize];
-        let o = self.offset(tb, level);
-        let (mut sum, mut hits) = (0i64, 0u32);
-        for (ci, chunk) in keys.chunks(CHUNK).enumerate() {
-            let base = ci * CHUNK;
-            for (j, k) in chunk.iter().enumerate() {
-                let v = lv.value([k[0] + o[0], k[1] + o[1], k[2] + o[2]]);
-                // At the leaves the value is exact (and never above the parent's).
-                let v = if level == 0 {
-                    v
-                } else {
-                    v.min(parent[base + j] as i64)
-                };
-                sum += v;
-                hits += (v == 2) as u32;
-                if let Some(out) = out.as_deref_mut() {
-                    out[base + j] = v as i8;
+        let n = keys.len();
+        let mut pos = 0;
+        while pos < n && !live.is_empty() {
+            let end = (pos + CHUNK).min(n);
+            let cut = cut();
+            live.retain_mut(|c| {
+                let o = c.offset;
+                let out = &mut buf[c.slot * n..(c.slot + 1) * n];
+                for &i in &order[pos..end] {
+                    let i = i as usize;
+                    let k = keys[i];
+                    let v = lv.value([k[0] + o[0], k[1] + o[1], k[2] + o[2]]);
+                    // At the leaves the value is exact (never above the parent's).
+                    let v = if level == 0 {
+                        v
+                    } else {
+                        v.min(parent[i] as i64)
+                    };
+                    c.sum += v;
+                    c.hits += (v == 2) as u32;
+                    out[i] = v as i8;
                 }
-            }
-            if sum + rest[base + chunk.len()] < cut {
-                return None;
-            }
+                c.sum + rest[end] >= cut
+            });
+            pos = end;
         }
-        Some((sum, hits))
     }
 
     /// The children of a block of `level` (indices at `level - 1`) on the searched axes.
@@ -429,7 +448,7 @@ impl Pass<'_> {
         })
     }
 
-    fn record(&self, w: &mut Worker, f: Found) {
+    fn record(&self, w: &mut Worker, f: Scored) {
         let better = match w.best {
             None => true,
             Some(b) => f.0 > b.0 || (f.0 == b.0 && f.2 < b.2),
@@ -464,7 +483,6 @@ impl Pass<'_> {
         let t_kids = Bnb::split(tb, level, b.n_t, b.searched_t);
         let r_kids = b.rot_children(rb, level);
         buf.resize(n * t_kids.len() * r_kids.len(), 0);
-        let lv = &b.levels[cl as usize];
         let mut live = std::mem::take(&mut w.live);
         for (ri, &rk) in r_kids.iter().enumerate() {
             let mut keys = std::mem::take(&mut w.keys);
@@ -474,38 +492,12 @@ impl Pass<'_> {
                 if cl > 0 && self.node_excluded(rk, tk, cl) {
                     continue;
                 }
-                live.push(Child {
-                    t: tk,
-                    offset: b.offset(tk, cl),
-                    sum: 0,
-                    hits: 0,
-                    slot: ri * t_kids.len() + ti,
-                });
+                live.push(Child::new(tk, b.offset(tk, cl), ri * t_kids.len() + ti));
             }
             w.bounded[cl as usize] += live.len();
-            // All the children of this rotation a chunk of voxels at a time: their windows
-            // are neighbours in the grids.
-            let mut pos = 0;
-            while pos < n && !live.is_empty() {
-                let end = (pos + CHUNK).min(n);
-                let cut = self.cut();
-                live.retain_mut(|c| {
-                    let o = c.offset;
-                    let out = &mut buf[c.slot * n..(c.slot + 1) * n];
-                    for &i in &order[pos..end] {
-                        let i = i as usize;
-                        let k = keys[i];
-                        let v = lv.value([k[0] + o[0], k[1] + o[1], k[2] + o[2]]);
-                        // At the leaves the value is exact (never above the parent's).
-                        let v = if cl == 0 { v } else { v.min(vals[i] as i64) };
-                        c.sum += v;
-                        c.hits += (v == 2) as u32;
-                        out[i] = v as i8;
-                    }
-                    c.sum + rest[end] >= cut
-                });
-                pos = end;
-            }
+            b.bound_children(cl, &keys, &order, vals, &rest, &mut live, &mut buf, || {
+                self.cut()
+            });
             let cut = self.cut();
             for c in &live {
                 if c.sum < cut {
@@ -567,19 +559,40 @@ impl Pass<'_> {
         suffix_sums(&twos, &mut all_rest);
         let rot_roots = blocks(b.n_r, b.searched_r, r_top);
         let t_roots = blocks(b.n_t, b.searched_t, top);
+        let identity: Vec<u32> = (0..n as u32).collect();
         let mut roots: Vec<(i64, [i32; 3], [i32; 3])> = rot_roots
             .par_iter()
             .map_init(new_worker, |w, rb| {
                 b.fill_keys(*rb, top, &mut w.keys);
-                t_roots
+                let mut live = std::mem::take(&mut w.live);
+                live.clear();
+                live.extend(
+                    t_roots
+                        .iter()
+                        .filter(|tb| !self.node_excluded(*rb, **tb, top))
+                        .enumerate()
+                        .map(|(slot, tb)| Child::new(*tb, b.offset(*tb, top), slot)),
+                );
+                let mut buf = std::mem::take(&mut w.root_vals);
+                buf.resize(n * live.len(), 0);
+                b.bound_children(
+                    top,
+                    &w.keys,
+                    &identity,
+                    &twos,
+                    &all_rest,
+                    &mut live,
+                    &mut buf,
+                    || self.floor,
+                );
+                let kept = live
                     .iter()
-                    .filter(|tb| !self.node_excluded(*rb, **tb, top))
-                    .filter_map(|tb| {
-                        b.bound(&w.keys, top, *tb, &twos, &all_rest, self.floor, None)
-                            .map(|(s, _)| (s, *rb, *tb))
-                    })
-                    .filter(|(s, _, _)| *s >= self.floor)
-                    .collect::<Vec<_>>()
+                    .filter(|c| c.sum >= self.floor)
+                    .map(|c| (c.sum, *rb, c.t))
+                    .collect::<Vec<_>>();
+                w.live = live;
+                w.root_vals = buf;
+                kept
             })
             .flatten()
             .collect();
@@ -603,15 +616,21 @@ impl Pass<'_> {
                     b.fill_keys(rb, top, &mut w.keys);
                     let mut vals = std::mem::take(&mut w.root_vals);
                     vals.resize(n, 0);
-                    let root = b.bound(
-                        &w.keys,
+                    let mut live = std::mem::take(&mut w.live);
+                    live.clear();
+                    live.push(Child::new(tb, b.offset(tb, top), 0));
+                    b.bound_children(
                         top,
-                        tb,
+                        &w.keys,
+                        &identity,
                         &twos,
                         &all_rest,
-                        i64::MIN,
-                        Some(&mut vals),
+                        &mut live,
+                        &mut vals,
+                        || i64::MIN,
                     );
+                    let root = live.first().map(|c| (c.sum, c.hits));
+                    w.live = live;
                     if let Some((s, h)) = root {
                         if top == 0 {
                             let c = Cand { r: rb, t: tb };
@@ -670,7 +689,7 @@ pub(super) fn exact_search(
         .map(|level| {
             let rot_level = level.saturating_sub(ROTATION_LAG);
             let axes = searched_r.iter().filter(|s| **s).count() as f64;
-            let theta = ((1u64 << rot_level) - 1) as f64 / 2.0 * l.dtheta(0) * axes;
+            let theta = half_steps(rot_level) * l.dtheta(0) * axes;
             let m = if theta > 0.0 { rho * theta + 1e-9 } else { 0.0 };
             let margin = [m, m, if yaw_only { 0.0 } else { m }];
             let mut shift = [0u32; 3];
