@@ -565,31 +565,32 @@ impl Pass<'_> {
             .map_init(new_worker, |w, rb| {
                 b.fill_keys(*rb, top, &mut w.keys);
                 let mut live = std::mem::take(&mut w.live);
-                live.clear();
-                live.extend(
-                    t_roots
-                        .iter()
-                        .filter(|tb| !self.node_excluded(*rb, **tb, top))
-                        .enumerate()
-                        .map(|(slot, tb)| Child::new(*tb, b.offset(*tb, top), slot)),
-                );
                 let mut buf = std::mem::take(&mut w.root_vals);
-                buf.resize(n * live.len(), 0);
-                b.bound_children(
-                    top,
-                    &w.keys,
-                    &identity,
-                    &twos,
-                    &all_rest,
-                    &mut live,
-                    &mut buf,
-                    || self.floor,
-                );
-                let kept = live
+                buf.resize(n, 0);
+                // One root at a time: its values stay in a buffer the size of the scan.
+                let mut kept = Vec::new();
+                for tb in t_roots
                     .iter()
-                    .filter(|c| c.sum >= self.floor)
-                    .map(|c| (c.sum, *rb, c.t))
-                    .collect::<Vec<_>>();
+                    .filter(|tb| !self.node_excluded(*rb, **tb, top))
+                {
+                    live.clear();
+                    live.push(Child::new(*tb, b.offset(*tb, top), 0));
+                    b.bound_children(
+                        top,
+                        &w.keys,
+                        &identity,
+                        &twos,
+                        &all_rest,
+                        &mut live,
+                        &mut buf,
+                        || self.floor,
+                    );
+                    kept.extend(
+                        live.iter()
+                            .filter(|c| c.sum >= self.floor)
+                            .map(|c| (c.sum, *rb, c.t)),
+                    );
+                }
                 w.live = live;
                 w.root_vals = buf;
                 kept
