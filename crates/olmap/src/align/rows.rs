@@ -85,17 +85,13 @@ impl RowGrid {
                     if z < 0 || z >= dz {
                         continue;
                     }
-                    let row = ((x * dz + z) * dy + rel[1]) as usize;
-                    let at = (tx * nz + tz) * ny;
-                    add_row(
-                        &mut hits[at + ty0..at + ty1],
-                        &self.occupied[row + ty0..row + ty1],
-                    );
+                    // The first cell inside the grid (`rel[1] + ty0 >= 0`).
+                    let row = ((x * dz + z) * dy + rel[1] + ty0 as i64) as usize;
+                    let len = ty1 - ty0;
+                    let at = (tx * nz + tz) * ny + ty0;
+                    add_row(&mut hits[at..at + len], &self.occupied[row..row + len]);
                     if !self.free.is_empty() {
-                        add_row(
-                            &mut conflicts[at + ty0..at + ty1],
-                            &self.free[row + ty0..row + ty1],
-                        );
+                        add_row(&mut conflicts[at..at + len], &self.free[row..row + len]);
                     }
                 }
             }
