@@ -199,12 +199,12 @@ impl CellGrid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::VoxelKey;
 
     /// A pseudo-random sequence (no dependency on the simulator's generator).
-    fn lcg(s: &mut u64) -> i64 {
+    pub(crate) fn lcg(s: &mut u64) -> i64 {
         *s = s
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);

@@ -128,16 +128,10 @@ impl Scores {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::align::cells::tests::lcg;
     use crate::align::dense::DenseGrid;
     use crate::geometry::VoxelKey;
     use crate::occupancy::OccupancyList;
-
-    fn lcg(s: &mut u64) -> i64 {
-        *s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*s >> 33) as i64
-    }
 
     /// Every translation of boxes inside, across and beyond the grid scores as the
     /// one-pose-at-a-time path does.

@@ -560,38 +560,40 @@ impl Pass<'_> {
         let rot_roots = blocks(b.n_r, b.searched_r, r_top);
         let t_roots = blocks(b.n_t, b.searched_t, top);
         let identity: Vec<u32> = (0..n as u32).collect();
+        // The bound of root block `tb` for the keys in `w.keys`, with its per-voxel values
+        // in `vals` (a buffer the size of the scan); `None` once it falls below `cut`.
+        let bound_root = |w: &mut Worker, tb: [i32; 3], vals: &mut [i8], cut: i64| {
+            let mut live = std::mem::take(&mut w.live);
+            live.clear();
+            live.push(Child::new(tb, b.offset(tb, top), 0));
+            b.bound_children(
+                top,
+                &w.keys,
+                &identity,
+                &twos,
+                &all_rest,
+                &mut live,
+                vals,
+                || cut,
+            );
+            let bound = live.first().map(|c| (c.sum, c.hits));
+            w.live = live;
+            bound
+        };
         let mut roots: Vec<(i64, [i32; 3], [i32; 3])> = rot_roots
             .par_iter()
             .map_init(new_worker, |w, rb| {
                 b.fill_keys(*rb, top, &mut w.keys);
-                let mut live = std::mem::take(&mut w.live);
                 let mut buf = std::mem::take(&mut w.root_vals);
                 buf.resize(n, 0);
-                // One root at a time: its values stay in a buffer the size of the scan.
-                let mut kept = Vec::new();
-                for tb in t_roots
+                let kept = t_roots
                     .iter()
                     .filter(|tb| !self.node_excluded(*rb, **tb, top))
-                {
-                    live.clear();
-                    live.push(Child::new(*tb, b.offset(*tb, top), 0));
-                    b.bound_children(
-                        top,
-                        &w.keys,
-                        &identity,
-                        &twos,
-                        &all_rest,
-                        &mut live,
-                        &mut buf,
-                        || self.floor,
-                    );
-                    kept.extend(
-                        live.iter()
-                            .filter(|c| c.sum >= self.floor)
-                            .map(|c| (c.sum, *rb, c.t)),
-                    );
-                }
-                w.live = live;
+                    .filter_map(|tb| {
+                        let (s, _) = bound_root(w, *tb, &mut buf, self.floor)?;
+                        (s >= self.floor).then_some((s, *rb, *tb))
+                    })
+                    .collect::<Vec<_>>();
                 w.root_vals = buf;
                 kept
             })
@@ -617,21 +619,7 @@ impl Pass<'_> {
                     b.fill_keys(rb, top, &mut w.keys);
                     let mut vals = std::mem::take(&mut w.root_vals);
                     vals.resize(n, 0);
-                    let mut live = std::mem::take(&mut w.live);
-                    live.clear();
-                    live.push(Child::new(tb, b.offset(tb, top), 0));
-                    b.bound_children(
-                        top,
-                        &w.keys,
-                        &identity,
-                        &twos,
-                        &all_rest,
-                        &mut live,
-                        &mut vals,
-                        || i64::MIN,
-                    );
-                    let root = live.first().map(|c| (c.sum, c.hits));
-                    w.live = live;
+                    let root = bound_root(&mut w, tb, &mut vals, i64::MIN);
                     if let Some((s, h)) = root {
                         if top == 0 {
                             let c = Cand { r: rb, t: tb };
