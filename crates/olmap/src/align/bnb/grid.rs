@@ -81,7 +81,7 @@ impl BitGrid {
     }
 
     /// Whether cell `k` is set (clear outside the box).
-    #[inline(always)]
+    #[cfg(test)]
     pub(super) fn get(&self, k: [i64; 3]) -> bool {
         let dx = (k[0] - self.lo[0]) as u64;
         let dy = (k[1] - self.lo[1]) as u64;
@@ -272,6 +272,71 @@ impl BitGrid {
     }
 }
 
+/// An occupancy grid and a free-space grid over the same box, their words interleaved so
+/// that one lookup reads both from the same cache line.
+#[derive(Debug, Clone)]
+pub(super) struct PairGrid {
+    lo: [i64; 3],
+    dims: [usize; 3],
+    words: usize,
+    /// `[occupied, free]` word pairs.
+    pairs: Vec<[u64; 2]>,
+}
+
+impl PairGrid {
+    /// Interleaves `occ` and `free` (clear everywhere when `None`). The two grids must
+    /// share their box.
+    pub(super) fn new(occ: BitGrid, free: Option<BitGrid>) -> Self {
+        let pairs = match &free {
+            Some(f) => {
+                assert!(
+                    f.lo == occ.lo && f.dims == occ.dims,
+                    "grids over different boxes"
+                );
+                occ.bits
+                    .iter()
+                    .zip(&f.bits)
+                    .map(|(&o, &f)| [o, f])
+                    .collect()
+            }
+            None => occ.bits.iter().map(|&o| [o, 0]).collect(),
+        };
+        PairGrid {
+            lo: occ.lo,
+            dims: occ.dims,
+            words: occ.words,
+            pairs,
+        }
+    }
+
+    /// Bytes held.
+    pub(super) fn bytes(&self) -> usize {
+        self.pairs.len() * 16
+    }
+
+    /// The bound of a voxel in cell `k`: 2 if the cell is occupied, -1 if free, else 0
+    /// (0 outside the box).
+    #[inline(always)]
+    pub(super) fn value(&self, k: [i64; 3]) -> i64 {
+        let dx = (k[0] - self.lo[0]) as u64;
+        let dy = (k[1] - self.lo[1]) as u64;
+        let dz = (k[2] - self.lo[2]) as u64;
+        // Negative differences wrap to huge values and fail these tests too.
+        if dx < self.dims[0] as u64 && dy < self.dims[1] as u64 && dz < self.dims[2] as u64 {
+            let w = (dx as usize * self.dims[1] + dy as usize) * self.words + (dz >> 6) as usize;
+            let [o, f] = self.pairs[w];
+            let b = dz & 63;
+            if o >> b & 1 == 1 {
+                2
+            } else {
+                -((f >> b & 1) as i64)
+            }
+        } else {
+            0
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -371,6 +436,29 @@ mod tests {
                             );
                         }
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pair_values_read_both_grids() {
+        let occ = cells();
+        // Free: a shifted copy, overlapping the occupied cells in places (occupied wins).
+        let free: Vec<[i64; 3]> = occ.iter().map(|c| [c[0] + 1, c[1], c[2] - 3]).collect();
+        let (lo, dims) = ([-6i64, -2, -10], [12usize, 14, 150]);
+        let with_free = PairGrid::new(grid_of(&occ, lo, dims), Some(grid_of(&free, lo, dims)));
+        let without = PairGrid::new(grid_of(&occ, lo, dims), None);
+        let inside = |k: [i64; 3]| (0..3).all(|i| k[i] >= lo[i] && k[i] < lo[i] + dims[i] as i64);
+        for x in lo[0] - 1..lo[0] + dims[0] as i64 + 1 {
+            for y in lo[1] - 1..lo[1] + dims[1] as i64 + 1 {
+                for z in lo[2] - 1..lo[2] + dims[2] as i64 + 1 {
+                    let k = [x, y, z];
+                    let o = inside(k) && naive(&occ, k);
+                    let f = inside(k) && naive(&free, k);
+                    let want = if o { 2 } else { -(f as i64) };
+                    assert_eq!(with_free.value(k), want, "at {k:?}");
+                    assert_eq!(without.value(k), if o { 2 } else { 0 }, "at {k:?}");
                 }
             }
         }

@@ -44,7 +44,7 @@ use std::time::Instant;
 use nalgebra::{Point3, Rotation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use self::grid::BitGrid;
+use self::grid::{BitGrid, PairGrid};
 use super::dense::DenseGrid;
 use super::params::SearchParams;
 use super::search::{
@@ -59,6 +59,11 @@ use crate::occupancy::OccupancyList;
 
 /// The coarsest level has at most this many translation blocks.
 const ROOT_TRANSLATIONS: u64 = 64;
+/// The roots (rotation blocks times translation blocks) number at most this many, when
+/// 16 levels allow it. Without it, a small window over three rotation axes made every
+/// rotation a root. On the car pair in a ±2° / ±0.3 m six-degree-of-freedom window the
+/// search took 25 / 24 / 34 / 42 s with at most 1,000 / 10,000 / 100,000 / any roots.
+const ROOT_NODES: u64 = 10_000;
 /// Memory allowed for all the bound grids together.
 const GRID_BUDGET_BYTES: usize = 1 << 30;
 /// A level's grid samples its windows every `2^(w - STRIDE_SLACK)` cells on an axis where
@@ -82,22 +87,15 @@ struct Level {
     margin: [f64; 3],
     /// Window grids sample every `2^shift` cells.
     shift: [u32; 3],
-    occ: BitGrid,
-    /// `None` when no free space is known.
-    free: Option<BitGrid>,
+    /// Occupied-if-any and free-if-all windows, interleaved.
+    cells: PairGrid,
 }
 
 impl Level {
     /// The score bound of a voxel whose window starts in cell `q` (sampled).
     #[inline(always)]
     fn value(&self, q: [i64; 3]) -> i64 {
-        if self.occ.get(q) {
-            2
-        } else if self.free.as_ref().is_some_and(|f| f.get(q)) {
-            -1
-        } else {
-            0
-        }
+        self.cells.value(q)
     }
 }
 
@@ -173,6 +171,11 @@ type Kid = (i64, [i32; 3], [i32; 3], usize);
 /// Per-thread scratch, counts and the best pose found.
 struct Worker {
     keys: Vec<[i64; 3]>,
+    /// Per level: the rotation block whose keys `level_keys` holds. Nodes that share a
+    /// rotation block share their keys, and depth first visits them one after another.
+    keys_of: Vec<Option<[i32; 3]>>,
+    /// Per level: the keys of the rotation block `keys_of`.
+    level_keys: Vec<Vec<[i64; 3]>>,
     /// Per level: the children kept (bound, rotation block, translation block, slot).
     kids: Vec<Vec<Kid>>,
     /// Per level: the children's per-voxel values, `scan.len()` per slot.
@@ -466,17 +469,33 @@ impl Pass<'_> {
         let cl = level - 1;
         // Voxels that can lose most first (the parent's 2s, then 0s, then -1s), so that a
         // child falls below the cut after as few lookups as possible.
+        // One counting pass, then one placing pass (values are 2, 0 or -1).
+        let group = |v: i8| -> usize {
+            match v {
+                2 => 0,
+                0 => 1,
+                _ => 2,
+            }
+        };
+        let mut count = [0usize; 3];
+        for &v in vals {
+            count[group(v)] += 1;
+        }
         let mut order = std::mem::take(&mut w.order[level as usize]);
         order.clear();
-        for want in [2i8, 0, -1] {
-            order.extend((0..n as u32).filter(|&i| vals[i as usize] == want));
+        order.resize(n, 0);
+        let mut at = [0, count[0], count[0] + count[1]];
+        for (i, &v) in vals.iter().enumerate() {
+            let g = group(v);
+            order[at[g]] = i as u32;
+            at[g] += 1;
         }
+        // The sum over `order[i..]`: the 2s left, then the -1s left.
         let mut rest = std::mem::take(&mut w.rest[level as usize]);
         rest.clear();
-        rest.resize(n + 1, 0);
-        for i in (0..n).rev() {
-            rest[i] = rest[i + 1] + vals[order[i] as usize] as i64;
-        }
+        rest.extend(
+            (0..=n).map(|i| 2 * count[0].saturating_sub(i) as i64 - (n - i).min(count[2]) as i64),
+        );
         let mut kids = std::mem::take(&mut w.kids[cl as usize]);
         kids.clear();
         let mut buf = std::mem::take(&mut w.vals[cl as usize]);
@@ -485,8 +504,11 @@ impl Pass<'_> {
         buf.resize(n * t_kids.len() * r_kids.len(), 0);
         let mut live = std::mem::take(&mut w.live);
         for (ri, &rk) in r_kids.iter().enumerate() {
-            let mut keys = std::mem::take(&mut w.keys);
-            b.fill_keys(rk, cl, &mut keys);
+            let mut keys = std::mem::take(&mut w.level_keys[cl as usize]);
+            if w.keys_of[cl as usize] != Some(rk) {
+                b.fill_keys(rk, cl, &mut keys);
+                w.keys_of[cl as usize] = Some(rk);
+            }
             live.clear();
             for (ti, &tk) in t_kids.iter().enumerate() {
                 if cl > 0 && self.node_excluded(rk, tk, cl) {
@@ -513,7 +535,7 @@ impl Pass<'_> {
                     kids.push((c.sum, rk, c.t, c.slot));
                 }
             }
-            w.keys = keys;
+            w.level_keys[cl as usize] = keys;
         }
         w.live = live;
         kids.sort_unstable_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
@@ -659,8 +681,17 @@ pub(super) fn exact_search(
             .map(|i| (n_t[i] as u64).div_ceil(1 << level))
             .product()
     };
+    let rot_roots_at = |level: u32| -> u64 {
+        let r = level.saturating_sub(ROTATION_LAG);
+        (0..3)
+            .filter(|&i| searched_r[i])
+            .map(|i| (n_r[i] as u64).div_ceil(1 << r))
+            .product()
+    };
     let mut top = 0u32;
-    while roots_at(top) > ROOT_TRANSLATIONS && top < 16 {
+    while (roots_at(top) > ROOT_TRANSLATIONS || roots_at(top) * rot_roots_at(top) > ROOT_NODES)
+        && top < 16
+    {
         top += 1;
     }
     let scan = &problem.scan[0];
@@ -760,12 +791,22 @@ pub(super) fn exact_search(
             }
             None => None,
         };
+        // Interleaving copies both grids (twice the occupied grid's bytes) before they go;
+        // without free space the pairs take twice the bytes of the occupied grid alone.
+        let pair_bytes = 2 * occ.bytes();
+        if pair_bytes > budget {
+            return Err(too_big());
+        }
+        if free.is_none() {
+            budget -= occ.bytes();
+        }
+        let cells = PairGrid::new(occ, free);
+        debug_assert_eq!(cells.bytes(), pair_bytes);
         levels.push(Level {
             rot_level: shape.rot_level,
             margin: shape.margin,
             shift: shape.shift,
-            occ,
-            free,
+            cells,
         });
     }
     drop(aligned);
@@ -785,6 +826,8 @@ pub(super) fn exact_search(
     let n_levels = top as usize + 1;
     let new_worker = || Worker {
         keys: Vec::new(),
+        keys_of: vec![None; n_levels],
+        level_keys: vec![Vec::new(); n_levels],
         kids: vec![Vec::new(); n_levels],
         vals: vec![Vec::new(); n_levels],
         rest: vec![Vec::new(); n_levels],
