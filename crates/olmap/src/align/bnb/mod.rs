@@ -21,8 +21,9 @@
 //! wide axes (the window then grows by less than a sample). Leaves are scored exactly on
 //! the finest grid with the arithmetic of the other searches.
 //!
-//! **Search.** The roots (every rotation block and the coarsest translation blocks) are
-//! bounded and processed best first, each depth first with children best first; a node is
+//! **Search.** The roots (every rotation block and translation block of the coarsest
+//! level, the first with at most [`ROOT_TRANSLATIONS`] translation blocks and
+//! [`ROOT_NODES`] roots) are bounded and processed best first, each depth first with children best first; a node is
 //! pruned when its bound is below the best score found so far, so the best pose of the
 //! finest lattice is always reached (ties go to the lowest pose index, as in the
 //! exhaustive search, whatever the number of threads).
