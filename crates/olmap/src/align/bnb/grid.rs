@@ -29,6 +29,20 @@ fn compact_even(w: u64) -> u64 {
     (x | (x >> 16)) & 0x0000_0000_FFFF_FFFF
 }
 
+/// The word and bit of cell `k` in a grid over `[lo, lo + dims)` with `words` words per
+/// (x, y) column; `None` outside the box.
+#[inline(always)]
+fn locate(lo: [i64; 3], dims: [usize; 3], words: usize, k: [i64; 3]) -> Option<(usize, u64)> {
+    let dx = (k[0] - lo[0]) as u64;
+    let dy = (k[1] - lo[1]) as u64;
+    let dz = (k[2] - lo[2]) as u64;
+    // Negative differences wrap to huge values and fail these tests too.
+    (dx < dims[0] as u64 && dy < dims[1] as u64 && dz < dims[2] as u64).then(|| {
+        let w = (dx as usize * dims[1] + dy as usize) * words + (dz >> 6) as usize;
+        (w, dz & 63)
+    })
+}
+
 /// Bits `[from, from + 64)` of a little-endian multiword column (bits past its end clear).
 #[inline]
 fn word_at(col: &[u64], from: i64) -> u64 {
@@ -83,16 +97,7 @@ impl BitGrid {
     /// Whether cell `k` is set (clear outside the box).
     #[cfg(test)]
     pub(super) fn get(&self, k: [i64; 3]) -> bool {
-        let dx = (k[0] - self.lo[0]) as u64;
-        let dy = (k[1] - self.lo[1]) as u64;
-        let dz = (k[2] - self.lo[2]) as u64;
-        // Negative differences wrap to huge values and fail these tests too.
-        if dx < self.dims[0] as u64 && dy < self.dims[1] as u64 && dz < self.dims[2] as u64 {
-            let w = (dx as usize * self.dims[1] + dy as usize) * self.words + (dz >> 6) as usize;
-            self.bits[w] >> (dz & 63) & 1 == 1
-        } else {
-            false
-        }
+        locate(self.lo, self.dims, self.words, k).is_some_and(|(w, b)| self.bits[w] >> b & 1 == 1)
     }
 
     /// Sets cell `k` (ignored outside the box).
@@ -318,21 +323,16 @@ impl PairGrid {
     /// (0 outside the box).
     #[inline(always)]
     pub(super) fn value(&self, k: [i64; 3]) -> i64 {
-        let dx = (k[0] - self.lo[0]) as u64;
-        let dy = (k[1] - self.lo[1]) as u64;
-        let dz = (k[2] - self.lo[2]) as u64;
-        // Negative differences wrap to huge values and fail these tests too.
-        if dx < self.dims[0] as u64 && dy < self.dims[1] as u64 && dz < self.dims[2] as u64 {
-            let w = (dx as usize * self.dims[1] + dy as usize) * self.words + (dz >> 6) as usize;
-            let [o, f] = self.pairs[w];
-            let b = dz & 63;
-            if o >> b & 1 == 1 {
-                2
-            } else {
-                -((f >> b & 1) as i64)
+        match locate(self.lo, self.dims, self.words, k) {
+            Some((w, b)) => {
+                let [o, f] = self.pairs[w];
+                if o >> b & 1 == 1 {
+                    2
+                } else {
+                    -((f >> b & 1) as i64)
+                }
             }
-        } else {
-            0
+            None => 0,
         }
     }
 }
