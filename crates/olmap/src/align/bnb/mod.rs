@@ -23,10 +23,10 @@
 //!
 //! **Search.** The roots (every rotation block and translation block of the coarsest
 //! level, the first with at most [`ROOT_TRANSLATIONS`] translation blocks and
-//! [`ROOT_NODES`] roots) are bounded and processed best first, each depth first with children best first; a node is
-//! pruned when its bound is below the best score found so far, so the best pose of the
-//! finest lattice is always reached (ties go to the lowest pose index, as in the
-//! exhaustive search, whatever the number of threads).
+//! [`ROOT_NODES`] roots) are bounded and processed best first, each depth first with
+//! children best first; a node is pruned when its bound is below the best score found so
+//! far, so the best pose of the finest lattice is always reached (ties go to the lowest
+//! pose index, as in the exhaustive search, whatever the number of threads).
 //!
 //! **Ambiguity.** The exhaustive search clusters the poses scoring at least `keep_ratio`
 //! of the best greedily in score order: a pose starts a cluster unless it lies within
@@ -469,8 +469,8 @@ impl Pass<'_> {
         let n = b.scan.len();
         let cl = level - 1;
         // Voxels that can lose most first (the parent's 2s, then 0s, then -1s), so that a
-        // child falls below the cut after as few lookups as possible.
-        // One counting pass, then one placing pass (values are 2, 0 or -1).
+        // child falls below the cut after as few lookups as possible: one counting pass,
+        // then one placing pass (values are 2, 0 or -1).
         let group = |v: i8| -> usize {
             match v {
                 2 => 0,
@@ -690,7 +690,8 @@ pub(super) fn exact_search(
             .product()
     };
     let mut top = 0u32;
-    while (roots_at(top) > ROOT_TRANSLATIONS || roots_at(top) * rot_roots_at(top) > ROOT_NODES)
+    while (roots_at(top) > ROOT_TRANSLATIONS
+        || roots_at(top).saturating_mul(rot_roots_at(top)) > ROOT_NODES)
         && top < 16
     {
         top += 1;
