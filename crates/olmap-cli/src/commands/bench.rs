@@ -197,12 +197,14 @@ fn register(p: &Pair, mode: SearchMode) -> anyhow::Result<(align::Registration, 
 
 fn alignment(p: &Pair, repeat: usize) -> anyhow::Result<(Value, Value)> {
     let mode = SearchMode::MultiResolution;
+    let mut totals = Vec::new();
     let ((r, e), search) = repeated(repeat, || {
-        let (r, e, _) = register(p, mode)?;
+        let (r, e, total) = register(p, mode)?;
+        totals.push(total);
         let s = r.search.seconds;
         Ok(((r, e), s))
     })?;
-    let (_, total) = repeated(repeat, || Ok(((), register(p, mode)?.2)))?;
+    let total = median(totals);
     let s = &r.search;
     // Overlap evaluations: poses scored, and voxel lookups (poses x scan voxels).
     let lookups: usize = s.levels.iter().map(|l| l.evaluated * l.scan_voxels).sum();

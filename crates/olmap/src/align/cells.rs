@@ -190,12 +190,6 @@ impl CellGrid {
             }
         }
     }
-
-    /// Bytes held.
-    #[allow(dead_code)]
-    pub fn memory_bytes(&self) -> usize {
-        self.words.len() * 8
-    }
 }
 
 #[cfg(test)]

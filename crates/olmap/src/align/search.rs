@@ -341,17 +341,7 @@ fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
     let map = problem.levels[level];
     let free = problem.free[level];
     // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.
-    let sorted;
-    let cands = if cands.is_sorted() {
-        cands
-    } else {
-        sorted = {
-            let mut v = cands.to_vec();
-            v.sort_unstable();
-            v
-        };
-        &sorted
-    };
+    debug_assert!(cands.is_sorted(), "candidates must come sorted");
     let groups: Vec<([i32; 3], Vec<[i32; 3]>)> = cands
         .chunk_by(|a, b| a.r == b.r)
         .map(|g| (g[0].r, g.iter().map(|c| c.t).collect()))

@@ -103,11 +103,8 @@ impl BitGrid {
     /// Sets cell `k` (ignored outside the box).
     #[inline]
     pub(super) fn set(&mut self, k: [i64; 3]) {
-        let d = [0, 1, 2].map(|i| (k[i] - self.lo[i]) as u64);
-        if (0..3).all(|i| d[i] < self.dims[i] as u64) {
-            let w =
-                (d[0] as usize * self.dims[1] + d[1] as usize) * self.words + (d[2] >> 6) as usize;
-            self.bits[w] |= 1 << (d[2] & 63);
+        if let Some((w, b)) = locate(self.lo, self.dims, self.words, k) {
+            self.bits[w] |= 1 << b;
         }
     }
 
@@ -200,7 +197,8 @@ impl BitGrid {
 
     /// Windows of `taps` cells merged: cell `c` of the result covers cells
     /// `[c, c + taps)` (per axis) of this grid. The result's box starts `taps - 1` cells
-    /// lower, so that every window touching this box has its cell.
+    /// lower, so that every window touching this box has its cell. `None` when the result
+    /// and the z pass together would hold more than `max_bytes`.
     pub(super) fn window(&self, taps: [usize; 3], any: bool, max_bytes: usize) -> Option<Self> {
         let grow = taps.map(|t| t.max(1) - 1);
         let lo = [0, 1, 2].map(|i| self.lo[i] - grow[i] as i64);
@@ -229,8 +227,9 @@ impl BitGrid {
             }
         }
         zpass.clear_tail();
-        // Then x and y: result column c merges source columns c - grow .. c.
-        let mut out = BitGrid::zeros(lo, dims, max_bytes)?;
+        // Then x and y: result column c merges source columns c - grow .. c. Both passes
+        // are held at once, and the result is at least as large as the z pass.
+        let mut out = BitGrid::zeros(lo, dims, max_bytes.checked_sub(zpass.bytes())?)?;
         let words = out.words;
         let mut acc = vec![0u64; words];
         for x in 0..dims[0] {

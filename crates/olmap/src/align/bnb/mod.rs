@@ -17,8 +17,9 @@
 //! are (a max pool over a sliding window, not the aligned downsample of the pyramid). A
 //! voxel can score at most 2 (may hit), -1 (free everywhere) or 0, so the sum over the scan
 //! never underestimates the score `2 hits - conflicts` of any pose of the node. To bound
-//! the memory, a level's grid samples the windows every `2^(l - STRIDE_SLACK)` cells on
-//! wide axes (the window then grows by less than a sample). Leaves are scored exactly on
+//! the memory, a level's grid samples the windows every `2^(w - STRIDE_SLACK)` cells (at
+//! most `2^l`) on an axis where they are about `2^w` cells wide, the block plus the rotation
+//! margins (the window then grows by less than a sample). Leaves are scored exactly on
 //! the finest grid with the arithmetic of the other searches.
 //!
 //! **Search.** The roots (every rotation block and translation block of the coarsest
@@ -107,24 +108,13 @@ fn fine_grids(
     free: Option<&DenseGrid>,
     align: u32,
 ) -> Option<(BitGrid, Option<BitGrid>)> {
-    let mut lo = [i64::MAX; 3];
-    let mut hi = [i64::MIN; 3];
-    let mut grow = |k: [i64; 3]| {
-        for i in 0..3 {
-            lo[i] = lo[i].min(k[i]);
-            hi[i] = hi[i].max(k[i]);
-        }
-    };
-    for (k, _) in occ.iter() {
-        grow([k.x as i64, k.y as i64, k.z as i64]);
-    }
+    let (mut lo, mut hi) = DenseGrid::key_box(occ).or_else(|| free.map(DenseGrid::bounds))?;
     if let Some(f) = free {
         let (a, b) = f.bounds();
-        grow(a);
-        grow(b);
-    }
-    if lo[0] > hi[0] {
-        return None;
+        for i in 0..3 {
+            lo[i] = lo[i].min(a[i]);
+            hi[i] = hi[i].max(b[i]);
+        }
     }
     let lo = lo.map(|v| (v >> align) << align);
     let dims = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
@@ -135,7 +125,7 @@ fn fine_grids(
     let f = match free {
         None => None,
         Some(f) => {
-            let mut fg = BitGrid::zeros(lo, dims, GRID_BUDGET_BYTES)?;
+            let mut fg = BitGrid::zeros(lo, dims, GRID_BUDGET_BYTES - g.bytes())?;
             let (a, b) = f.bounds();
             let fd = [0, 1, 2].map(|i| (b[i] - a[i] + 1) as usize);
             let off = [0, 1, 2].map(|i| (a[i] - lo[i]) as usize);
@@ -155,15 +145,6 @@ fn fine_grids(
         }
     };
     Some((g, f))
-}
-
-/// `out[i]` = the sum of `vals[i..]` (`out[vals.len()] = 0`).
-fn suffix_sums(vals: &[i8], out: &mut Vec<i64>) {
-    out.clear();
-    out.resize(vals.len() + 1, 0);
-    for i in (0..vals.len()).rev() {
-        out[i] = out[i + 1] + vals[i] as i64;
-    }
 }
 
 /// A child kept for expansion: bound, rotation block, translation block, values slot.
@@ -278,12 +259,9 @@ impl Bnb<'_> {
         let (t0, cell) = (self.lattice.t0, self.lattice.finest);
         out.clear();
         out.extend(self.scan.iter().map(|c| {
-            // The formula of `key_of` when the margin is 0.
+            // The formula of `key_of` (`v - 0.0` is `v`, so the same keys at margin 0).
             let p = rot * c.coords + t0;
-            let k = |v: f64, m: f64, s: u32| -> i64 {
-                let f = if m == 0.0 { v / cell } else { (v - m) / cell };
-                (f.floor() as i64) >> s
-            };
+            let k = |v: f64, m: f64, s: u32| -> i64 { (((v - m) / cell).floor() as i64) >> s };
             [
                 k(p.x, lv.margin[0], lv.shift[0]),
                 k(p.y, lv.margin[1], lv.shift[1]),
@@ -578,8 +556,8 @@ impl Pass<'_> {
         };
         let n = b.scan.len();
         let twos = vec![2i8; n];
-        let mut all_rest = Vec::new();
-        suffix_sums(&twos, &mut all_rest);
+        // The sum of `twos` over `i..`.
+        let all_rest: Vec<i64> = (0..=n).map(|i| 2 * (n - i) as i64).collect();
         let rot_roots = blocks(b.n_r, b.searched_r, r_top);
         let t_roots = blocks(b.n_t, b.searched_t, top);
         let identity: Vec<u32> = (0..n as u32).collect();
