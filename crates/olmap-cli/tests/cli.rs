@@ -160,7 +160,7 @@ fn demo_maps_a_team_and_each_robot_alone() {
     assert_eq!(counted, team["compared"].as_u64().unwrap());
     assert!(v["evaluation"]["solo"]["compared"].as_u64().unwrap() >= 2);
     assert!(v["relative_frames"].as_array().unwrap().len() == 1);
-    let back = olmap::io::sim_dataset::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
+    let back = olmap::sim::read_dataset(v["dataset"].as_str().unwrap()).unwrap();
     assert_eq!(back.manifest.robots.len(), 2);
     // The HTML report: self-contained, with the team's and both robots' top views, the
     // error histogram and the entropy curve as inlined PNGs.
@@ -550,7 +550,7 @@ fn simulate_writes_a_dataset_and_refuses_to_overwrite() {
     ];
     let v = json(&olmap(&args));
     assert_eq!(v["scans"], 4);
-    let back = olmap::io::sim_dataset::read_dataset(&out).unwrap();
+    let back = olmap::sim::read_dataset(&out).unwrap();
     assert_eq!(back.manifest.world, "box-room");
     assert_eq!(back.manifest.robots[1].scans2d.len(), 2);
     // In an empty room two robots 1 m or more apart see each other both ways.

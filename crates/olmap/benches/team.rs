@@ -12,7 +12,7 @@ use olmap::align::{global_search, Locus, Region, SearchParams, SearchTarget};
 use olmap::cloud::PointCloud;
 use olmap::geometry::{Pose, PoseError};
 use olmap::sim::{simulate, OdometryNoise, RobotModel, SimConfig, SimDataset, WorldKind};
-use olmap::team::{map_solo, map_team, ScanStore, TeamParams};
+use olmap::team::{map_solo, map_team, TeamParams};
 
 fn main() {
     divan::main();
@@ -83,7 +83,7 @@ fn search_sighted_scan(bencher: Bencher, name: &str) {
 /// Mapping 3 robots x 4 scans: as a team (sightings, clearing) or every robot alone.
 #[divan::bench(args = ["team", "solo"], sample_count = 2, sample_size = 1)]
 fn map_three_robots(bencher: Bencher, how: &str) {
-    let store = ScanStore::from_sim(data()).unwrap();
+    let store = data().to_store().unwrap();
     let params = TeamParams::default();
     bencher.bench(|| match how {
         "team" => map_team(&store, &params, |_, _| {})

@@ -39,6 +39,7 @@ pub mod align;
 pub mod beacon;
 pub mod cloud;
 pub mod error;
+pub mod file;
 pub mod fixtures;
 pub mod geometry;
 pub mod grid2d;

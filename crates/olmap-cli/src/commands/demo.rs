@@ -14,7 +14,7 @@ use std::time::Instant;
 use anyhow::{ensure, Context};
 use clap::Args;
 use olmap::geometry::PoseList;
-use olmap::io::sim_dataset::{read_dataset, write_dataset};
+use olmap::sim::{read_dataset, write_dataset};
 use olmap::sim::{simulate, OdometryNoise, SimConfig, WorldKind};
 use olmap::team::{scan_name, ScanStore, TeamParams};
 use serde_json::json;
@@ -84,7 +84,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
     let sim_seconds = start.elapsed().as_secs_f64();
 
     // Every robot's own store, merged as the robots would when they meet (§6.3.2).
-    let all = ScanStore::from_sim(&data)?;
+    let all = data.to_store()?;
     let mut store = ScanStore::new();
     for r in all.robots() {
         store.merge(&all.robot_store(r))?;

@@ -283,7 +283,7 @@ pub fn run_map(a: &MapArgs) -> anyhow::Result<ExitCode> {
         "seconds": built.seconds,
     });
     if let Some(path) = &a.report {
-        io::write_atomic(path, "JSON report", |w| {
+        olmap::file::write_atomic(path, "JSON report", |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
         })?;
         write_map_html(&built, scans.len(), a, &report, path)?;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Args, ValueEnum};
-use olmap::io::sim_dataset::write_dataset;
+use olmap::sim::write_dataset;
 use olmap::sim::{
     simulate, MirrorScanner, OdometryNoise, PlanarScanner, RobotModel, Scanner3d, SimConfig,
     SpinningLidar, WorldKind,

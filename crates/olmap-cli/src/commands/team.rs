@@ -9,10 +9,10 @@ use std::process::ExitCode;
 use anyhow::{ensure, Context};
 use clap::Args;
 use olmap::geometry::{Pose, PoseList};
-use olmap::io::sim_dataset::read_dataset;
 use olmap::io::{self, WriteOptions};
 use olmap::mapping::{evaluate, mean_median_max, position_histogram, Evaluation, Placement};
 use olmap::occupancy;
+use olmap::sim::read_dataset;
 use olmap::team::{map_solo, map_team, scan_name, ScanStore, TeamMap, TeamParams};
 use serde_json::{json, Value};
 
@@ -41,7 +41,7 @@ pub struct TeamArgs {
 /// Runs `olmap team`.
 pub fn run(args: &TeamArgs) -> anyhow::Result<ExitCode> {
     let data = read_dataset(&args.dataset)?;
-    let store = ScanStore::from_dataset(&data)?;
+    let store = data.to_store()?;
     let mut truth = PoseList::default();
     for (r, list) in data.truth.iter().enumerate() {
         for (k, p) in list.poses.iter().enumerate() {
@@ -256,7 +256,7 @@ pub fn run_pipeline(
         "files": {"map": ["team.olm", "team.ply", "team.bt"], "poses": "team_poses.txt", "store": "team.store"},
     });
     let path = out.join("report.json");
-    io::write_atomic(&path, "JSON", |w| {
+    olmap::file::write_atomic(&path, "JSON", |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
     })?;
     let html_path = write_html(store, &team, &solo_runs, &report, &path)?;

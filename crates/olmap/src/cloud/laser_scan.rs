@@ -46,7 +46,7 @@ use nalgebra::Point3;
 
 use super::PointCloud;
 use crate::error::{ParseError, Result};
-use crate::io::text::for_each_line;
+use crate::file::text::for_each_line;
 
 const MAGIC: &str = "# olmap laser scan v1";
 const PARAMS: &str = "angle_min,angle_increment,range_min,range_max,time";
@@ -396,13 +396,13 @@ impl LaserScan {
 
     /// Writes the scan as JSON to a file atomically.
     pub fn write_json_path(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), FORMAT_JSON, |w| self.write_json(w))
+        crate::file::write_atomic(path.as_ref(), FORMAT_JSON, |w| self.write_json(w))
     }
 
     /// Reads a scan from a JSON file; errors name the file and, for malformed JSON, the
     /// line.
     pub fn read_json_path(path: impl AsRef<Path>) -> Result<Self> {
-        crate::io::parse_file(path.as_ref(), FORMAT_JSON, Self::read_json)
+        crate::file::parse_file(path.as_ref(), FORMAT_JSON, Self::read_json)
     }
 
     /// Reads a scan from a `.json` file as JSON, anything else as CSV.
@@ -421,11 +421,11 @@ impl LaserScan {
 
     /// Writes the scan as CSV to a file atomically.
     pub fn write_csv_path(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), FORMAT, |w| self.write_csv(w))
+        crate::file::write_atomic(path.as_ref(), FORMAT, |w| self.write_csv(w))
     }
 
     /// Reads a scan from a CSV file; errors name the file and the line.
     pub fn read_csv_path(path: impl AsRef<Path>) -> Result<Self> {
-        crate::io::parse_file(path.as_ref(), FORMAT, Self::read_csv)
+        crate::file::parse_file(path.as_ref(), FORMAT, Self::read_csv)
     }
 }

@@ -15,7 +15,7 @@ use std::path::Path;
 
 use super::pose::Pose;
 use crate::error::{ParseError, Result};
-use crate::io::text::{for_each_line, parse_f64};
+use crate::file::text::{for_each_line, parse_f64};
 
 /// A pose with the name of the scan (or robot, or frame) it belongs to.
 #[derive(Debug, Clone, PartialEq)]
@@ -157,12 +157,12 @@ impl PoseList {
 
     /// Reads a pose file.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
-        crate::io::parse_file(path.as_ref(), "pose list", Self::read)
+        crate::file::parse_file(path.as_ref(), "pose list", Self::read)
     }
 
     /// Writes a pose file atomically (temporary file, then rename).
     pub fn write_path(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), "pose list", |w| self.write(w))
+        crate::file::write_atomic(path.as_ref(), "pose list", |w| self.write(w))
     }
 }
 

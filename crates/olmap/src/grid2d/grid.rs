@@ -4,8 +4,8 @@
 use nalgebra::Point3;
 
 use super::raytrace::bresenham;
-use super::ros_map::{Thresholds, Trinary, TrinaryGrid};
 use super::sensor_model::SensorModel2d;
+use super::trinary::{CellCounts, Thresholds, Trinary, TrinaryGrid};
 use crate::cloud::LaserScan;
 use crate::error::{Error, Result};
 use crate::geometry::Pose;
@@ -63,28 +63,6 @@ pub struct InsertStats {
     pub free_updates: usize,
     /// Distinct cells updated as occupied.
     pub occupied_updates: usize,
-}
-
-/// Numbers of free, occupied and unknown cells of a grid.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct CellCounts {
-    /// Cells classified free.
-    pub free: usize,
-    /// Cells classified occupied.
-    pub occupied: usize,
-    /// Cells neither free nor occupied (never observed, or not certain enough).
-    pub unknown: usize,
-}
-
-impl CellCounts {
-    /// Adds one cell of the given class.
-    pub fn add(&mut self, t: Trinary) {
-        match t {
-            Trinary::Free => self.free += 1,
-            Trinary::Occupied => self.occupied += 1,
-            Trinary::Unknown => self.unknown += 1,
-        }
-    }
 }
 
 fn check_resolution(resolution: f64) -> Result<()> {

@@ -44,9 +44,11 @@ pub mod navigation;
 pub mod raytrace;
 pub mod ros_map;
 pub mod sensor_model;
+pub mod trinary;
 
-pub use grid::{CellCounts, InsertStats, OccupancyGrid2d};
+pub use grid::{InsertStats, OccupancyGrid2d};
 pub use navigation::{navigation_grid, NavGridParams};
 pub use raytrace::{bresenham, Bresenham};
-pub use ros_map::{read_ros_map, write_ros_map, Thresholds, Trinary, TrinaryGrid};
+pub use ros_map::{read_ros_map, write_ros_map};
 pub use sensor_model::SensorModel2d;
+pub use trinary::{CellCounts, Thresholds, Trinary, TrinaryGrid};

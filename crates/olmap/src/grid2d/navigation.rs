@@ -4,7 +4,7 @@
 use rustc_hash::FxHashSet;
 
 use super::raytrace::bresenham;
-use super::ros_map::{Trinary, TrinaryGrid};
+use super::trinary::{Trinary, TrinaryGrid};
 use crate::error::{Error, Result};
 use crate::geometry::Pose;
 use crate::occupancy::OccupancyList;

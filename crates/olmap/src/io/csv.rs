@@ -17,11 +17,11 @@ use std::path::Path;
 
 use nalgebra::{Matrix4, Vector3};
 
-use super::text::{fields, for_each_line, is_blank_or_comment, parse_f64};
 use super::xyz::truncate;
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::{ParseError, Result};
+use crate::file::text::{fields, for_each_line, is_blank_or_comment, parse_f64};
 use crate::geometry::{Pose, PoseList};
 
 #[derive(Default)]
@@ -268,7 +268,7 @@ pub fn read_pose_table<R: BufRead>(reader: R) -> Result<PoseList, ParseError> {
 
 /// Reads a pose table file; see [`read_pose_table`].
 pub fn read_pose_table_path(path: impl AsRef<Path>) -> Result<PoseList> {
-    super::parse_file(path.as_ref(), "CSV pose table", read_pose_table)
+    crate::file::parse_file(path.as_ref(), "CSV pose table", read_pose_table)
 }
 
 /// Writes a pose table in the `carCloudList.csv` layout.

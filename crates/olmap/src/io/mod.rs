@@ -20,27 +20,23 @@
 //! [`ReadReport::dropped_non_finite`]. Writers write to a temporary file beside the target
 //! and rename it into place, so a failed write never leaves a half-written file.
 
-pub mod crc32;
 pub mod csv;
-pub(crate) mod cursor;
 pub mod kitti;
-pub mod lzf;
 pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
 pub mod scan_graph;
-pub mod sim_dataset;
 pub mod slam6d;
-pub(crate) mod text;
 pub mod uos;
 pub mod xyz;
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, ParseError, Result};
+use crate::file::{open_buffered, write_atomic};
 
 /// The point-cloud file formats olmap knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -419,81 +415,6 @@ fn has_extension(path: &Path, ext: &str) -> bool {
 fn starts_with<R: BufRead>(reader: &mut R, path: &Path, magic: &[u8]) -> Result<bool> {
     let head = reader.fill_buf().map_err(|e| Error::io(path, e))?;
     Ok(head.starts_with(magic))
-}
-
-/// Opens a file for buffered reading, with errors that name it (and a clear one for
-/// directories).
-pub fn open_buffered(path: &Path) -> Result<BufReader<File>> {
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if meta.is_dir() {
-        return Err(Error::IsDirectory {
-            path: path.to_path_buf(),
-        });
-    }
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
-    Ok(BufReader::with_capacity(1 << 18, file))
-}
-
-/// Opens `path` and runs a stream parser on it, wrapping its error with the path and the
-/// format name.
-pub(crate) fn parse_file<T>(
-    path: &Path,
-    format: &'static str,
-    parse: impl FnOnce(BufReader<File>) -> Result<T, ParseError>,
-) -> Result<T> {
-    parse(open_buffered(path)?).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format,
-        source,
-    })
-}
-
-/// Reads a whole file into memory, with errors that name it.
-pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
-    let mut r = open_buffered(path)?;
-    let mut v = Vec::new();
-    r.read_to_end(&mut v).map_err(|e| Error::io(path, e))?;
-    Ok(v)
-}
-
-/// Writes a file atomically: `write` fills a temporary file beside `path`, which is renamed
-/// onto `path` only when everything succeeded; on failure the temporary file is removed and
-/// an existing `path` is left untouched.
-pub fn write_atomic(
-    path: &Path,
-    format: &'static str,
-    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
-) -> Result<()> {
-    if path.is_dir() {
-        return Err(Error::IsDirectory {
-            path: path.to_path_buf(),
-        });
-    }
-    let file_name = path.file_name().ok_or_else(|| Error::Write {
-        path: path.to_path_buf(),
-        format,
-        reason: "the path has no file name".into(),
-    })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(format!(".olmap-tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    let file = File::create(&tmp).map_err(|e| Error::io(path, e))?;
-    let mut w = BufWriter::with_capacity(1 << 18, file);
-    let result = write(&mut w).and_then(|_| w.flush());
-    drop(w);
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::Write {
-            path: path.to_path_buf(),
-            format,
-            reason: e.to_string(),
-        });
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
 }
 
 /// Converts a point to single precision and keeps it if all three coordinates are finite

@@ -177,7 +177,7 @@ pub fn read<R: BufRead>(reader: R, max_voxels: usize) -> Result<BtTree, ParseErr
 
 /// Reads a `.bt` OctoMap tree from a file; see [`read()`].
 pub fn read_path(path: &Path, max_voxels: usize) -> crate::Result<BtTree> {
-    super::parse_file(path, "OctoMap .bt", |r| read(r, max_voxels))
+    crate::file::parse_file(path, "OctoMap .bt", |r| read(r, max_voxels))
 }
 
 /// Parses header and body, returning the occupied leaves unexpanded.
@@ -630,7 +630,7 @@ pub fn write<W: Write>(
 /// appears complete or not at all.
 pub fn write_path(path: &Path, resolution: f64, occupied: &[VoxelKey]) -> crate::Result<BtStats> {
     let mut stats = None;
-    super::write_atomic(path, "OctoMap .bt", |w| {
+    crate::file::write_atomic(path, "OctoMap .bt", |w| {
         stats = Some(write(w, resolution, occupied)?);
         Ok(())
     })?;

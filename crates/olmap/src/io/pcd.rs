@@ -32,7 +32,7 @@
 //! * `DATA ascii`: one point per line, values separated by whitespace. `DATA binary`: packed
 //!   little-endian records, the fields in order (record size Σ size·count). `DATA
 //!   binary_compressed`: a little-endian `u32` compressed size, a `u32` uncompressed size and
-//!   one LZF block (see [`super::lzf`]) of the data rearranged field by field
+//!   one LZF block (see [`crate::file::lzf`]) of the data rearranged field by field
 //!   (structure of arrays: all the values of the first field, then of the second, ...).
 //!
 //! ## What the reader takes from a file
@@ -77,9 +77,10 @@ use std::str::FromStr;
 
 use nalgebra::{Point3, Vector3};
 
-use super::{finite_point, lzf, CloudFormat, LoadedCloud, PcdEncoding, ReadReport};
+use super::{finite_point, CloudFormat, LoadedCloud, PcdEncoding, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::{Location, ParseError};
+use crate::file::lzf;
 
 /// Longest header line accepted (a guard against binary garbage without line ends).
 const MAX_HEADER_LINE: u64 = 1 << 20;

@@ -17,10 +17,10 @@ use std::io::{BufRead, Write};
 
 use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 
-use super::cursor::ByteCursor;
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::{Location, ParseError};
+use crate::file::cursor::ByteCursor;
 use crate::geometry::Pose;
 
 /// One node of a ScanGraph: a scan in its sensor frame and the sensor's pose.

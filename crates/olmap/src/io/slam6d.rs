@@ -17,8 +17,8 @@ use std::path::Path;
 
 use nalgebra::{Matrix4, Rotation3, Vector3};
 
-use super::text::{for_each_line, is_blank_or_comment, parse_f64};
 use crate::error::{ParseError, Result};
+use crate::file::text::{for_each_line, is_blank_or_comment, parse_f64};
 use crate::geometry::{pose_3dtk_cm_from_rh_m, pose_rh_m_from_3dtk_cm, Pose};
 
 /// Rotation tolerance for matrices written with six significant digits.
@@ -235,12 +235,12 @@ pub fn write_frames<W: Write>(mut w: W, frames: &[Frame]) -> std::io::Result<()>
 
 /// Reads a `.pose` file.
 pub fn read_pose_path(path: impl AsRef<Path>) -> Result<Pose> {
-    super::parse_file(path.as_ref(), "3DTK .pose", read_pose)
+    crate::file::parse_file(path.as_ref(), "3DTK .pose", read_pose)
 }
 
 /// Reads a `.frames` file.
 pub fn read_frames_path(path: impl AsRef<Path>) -> Result<Vec<Frame>> {
-    super::parse_file(path.as_ref(), "3DTK .frames", read_frames)
+    crate::file::parse_file(path.as_ref(), "3DTK .frames", read_frames)
 }
 
 /// The final registered pose of a `.frames` file (its last frame).

@@ -10,10 +10,10 @@
 
 use std::io::{BufRead, Write};
 
-use super::text::{fields, for_each_line, is_blank_or_comment, parse_f64};
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::ParseError;
+use crate::file::text::{fields, for_each_line, is_blank_or_comment, parse_f64};
 
 /// How many unparseable lines may precede the first point.
 pub const MAX_HEADER_LINES: usize = 10;

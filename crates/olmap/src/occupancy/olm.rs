@@ -24,8 +24,8 @@ use super::list::{check_resolution, OccupancyList};
 use super::packed::{entry_count, entry_key, MAX_COUNT};
 use super::table::VoxelTable;
 use crate::error::{Location, ParseError, Result};
-use crate::io::crc32::Crc32;
-use crate::io::cursor::ByteCursor;
+use crate::file::crc32::Crc32;
+use crate::file::cursor::ByteCursor;
 
 /// The 8 bytes every `.olm` file starts with.
 pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
@@ -150,12 +150,12 @@ impl OccupancyList {
 
     /// Writes a `.olm` file atomically.
     pub fn write_olm_path(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), "olmap .olm", |w| self.write_olm(w))
+        crate::file::write_atomic(path.as_ref(), "olmap .olm", |w| self.write_olm(w))
     }
 
     /// Reads a `.olm` file.
     pub fn read_olm_path(path: impl AsRef<Path>) -> Result<OccupancyList> {
-        crate::io::parse_file(path.as_ref(), "olmap .olm", Self::read_olm)
+        crate::file::parse_file(path.as_ref(), "olmap .olm", Self::read_olm)
     }
 }
 

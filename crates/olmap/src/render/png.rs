@@ -6,7 +6,7 @@ use std::path::Path;
 use image::{ImageFormat, RgbImage};
 
 use crate::error::{Error, Result};
-use crate::io::write_atomic;
+use crate::file::write_atomic;
 
 /// The PNG file of an image.
 pub fn png_bytes(image: &RgbImage) -> Result<Vec<u8>> {

@@ -6,7 +6,7 @@ use std::path::Path;
 use base64::Engine;
 
 use crate::error::Result;
-use crate::io::write_atomic;
+use crate::file::write_atomic;
 use crate::render::png_bytes;
 use image::RgbImage;
 

@@ -46,7 +46,7 @@ use std::path::Path;
 
 use super::{MirrorGeometry, Mounting};
 use crate::error::{ParseError, Result};
-use crate::io::text::for_each_line;
+use crate::file::text::for_each_line;
 
 /// The first line of a mirror log.
 const MAGIC: &str = "# olmap mirror log v1";
@@ -339,12 +339,12 @@ impl MirrorLog {
 
     /// Writes the log to a file atomically.
     pub fn write_path(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), FORMAT, |w| self.write(w))
+        crate::file::write_atomic(path.as_ref(), FORMAT, |w| self.write(w))
     }
 
     /// Reads a log from a file; errors name the file and the line.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
-        crate::io::parse_file(path.as_ref(), FORMAT, Self::read)
+        crate::file::parse_file(path.as_ref(), FORMAT, Self::read)
     }
 }
 

@@ -5,16 +5,19 @@
 
 mod benchmark;
 mod dataset;
+pub mod files;
 mod rng;
 mod robot;
 mod scanners;
 mod shape;
 mod sighting;
+mod to_store;
 mod world;
 mod worlds;
 
 pub use benchmark::{thesis_localisation, LocalisationBenchmark, THESIS_RESOLUTION};
 pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
+pub use files::{read_dataset, write_dataset, DatasetOnDisk};
 pub use rng::{mix64, SimRng};
 pub use robot::{
     odometry_for, plan_trajectories, BeaconMount, MotionModel, OdometryNoise, RobotModel,

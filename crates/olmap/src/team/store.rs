@@ -23,7 +23,7 @@
 //!
 //! The file format is documented on [`ScanStore::write`] (public, as this module is not).
 //!
-//! The store is written with [`crate::io::write_atomic`]: a temporary file beside the
+//! The store is written with [`crate::file::write_atomic`]: a temporary file beside the
 //! target is renamed into place when complete.
 
 use std::collections::BTreeMap;
@@ -34,9 +34,9 @@ use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Location, ParseError, Result};
+use crate::file::crc32::Crc32;
+use crate::file::cursor::ByteCursor;
 use crate::geometry::Pose;
-use crate::io::crc32::Crc32;
-use crate::io::cursor::ByteCursor;
 
 /// The 8 bytes every scan-store file starts with.
 pub const STORE_MAGIC: &[u8; 8] = b"OLSTORE\n";
@@ -290,12 +290,12 @@ impl ScanStore {
     /// poses, times and sightings are finite, and the checksum; any violation is an
     /// [`Error::Read`] naming the file, with the byte offset where one applies.
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::io::write_atomic(path.as_ref(), FORMAT, |w| self.write_to(w))
+        crate::file::write_atomic(path.as_ref(), FORMAT, |w| self.write_to(w))
     }
 
     /// Reads a store file; any problem is an [`Error::Read`] naming the file.
     pub fn read(path: impl AsRef<Path>) -> Result<ScanStore> {
-        crate::io::parse_file(path.as_ref(), FORMAT, Self::read_from)
+        crate::file::parse_file(path.as_ref(), FORMAT, Self::read_from)
     }
 
     /// Writes the store to a stream in the file format of [`ScanStore::write`].
@@ -330,83 +330,6 @@ impl ScanStore {
             return Err(ParseError::Empty);
         }
         decode_store(&data)
-    }
-
-    /// One store holding every robot's records of a simulated run: robot `r`'s scan at
-    /// stop `k` becomes record `(r, k)` with its odometry, its cloud and the sightings
-    /// robot `r` made at stop `k` (in target order); the time stamp is the sightings' time,
-    /// or `k` times the configured stop interval for a scan without sightings.
-    ///
-    /// ```
-    /// use olmap::sim::{simulate, Scanner3d, SimConfig, SpinningLidar, WorldKind};
-    /// use olmap::team::ScanStore;
-    /// let lidar = SpinningLidar { beams: 8, azimuth_step: 4f64.to_radians(), ..Default::default() };
-    /// let config = SimConfig {
-    ///     world: WorldKind::BoxRoom, robots: 2, stops: 2,
-    ///     scanner: Scanner3d::Lidar(lidar), ..Default::default()
-    /// };
-    /// let data = simulate(&config, |_, _| {})?;
-    /// let all = ScanStore::from_sim(&data)?;
-    /// assert_eq!(all.len(), 4);
-    /// assert_eq!(all.robot_name(1), "robot1");
-    /// // Before meeting anyone, robot 0 holds only its own two scans.
-    /// assert_eq!(all.robot_store(0).len(), 2);
-    /// # Ok::<(), olmap::Error>(())
-    /// ```
-    pub fn from_sim(data: &crate::sim::SimDataset) -> Result<ScanStore> {
-        let counts: Vec<usize> = data.robots.iter().map(|r| r.scans.len()).collect();
-        let groups = group_sightings(&data.sightings, &counts)
-            .map_err(|reason| Error::InvalidArgument(format!("simulated dataset: {reason}")))?;
-        let mut store = ScanStore::new();
-        for (r, robot) in data.robots.iter().enumerate() {
-            let id = index_u32(r, "robot index")?;
-            store.set_robot_name(id, &robot.name)?;
-            for (k, cloud) in robot.scans.iter().enumerate() {
-                store.insert(make_record(
-                    id,
-                    k,
-                    cloud.clone(),
-                    robot.odometry.get(k).copied(),
-                    groups.get(&(r, k)).map_or(&[][..], |v| &v[..]),
-                    data.config.stop_interval,
-                )?)?;
-            }
-        }
-        Ok(store)
-    }
-
-    /// One store holding every robot's records of a dataset on disk (see
-    /// [`ScanStore::from_sim`]); the scans are read from their PCD files with
-    /// [`crate::io::read_cloud`], the time step is the manifest's `stop_interval_s`.
-    pub fn from_dataset(data: &crate::io::sim_dataset::DatasetOnDisk) -> Result<ScanStore> {
-        let counts: Vec<usize> = data.manifest.robots.iter().map(|r| r.scans.len()).collect();
-        let groups = group_sightings(&data.sightings, &counts).map_err(|reason| Error::Read {
-            path: data.dir.join(&data.manifest.sightings),
-            format: "sightings CSV",
-            source: ParseError::Malformed(reason),
-        })?;
-        let mut store = ScanStore::new();
-        for (r, files) in data.manifest.robots.iter().enumerate() {
-            let id = index_u32(r, "robot index")?;
-            store.set_robot_name(id, &files.name)?;
-            for (k, path) in data.scan_paths(r).iter().enumerate() {
-                let cloud = crate::io::read_cloud(path)?.cloud;
-                let odometry = data
-                    .odometry
-                    .get(r)
-                    .and_then(|list| list.poses.get(k))
-                    .map(|p| p.pose);
-                store.insert(make_record(
-                    id,
-                    k,
-                    cloud,
-                    odometry,
-                    groups.get(&(r, k)).map_or(&[][..], |v| &v[..]),
-                    data.manifest.stop_interval_s,
-                )?)?;
-            }
-        }
-        Ok(store)
     }
 
     /// A store with only `robot`'s own records and name: what the robot holds before it
@@ -495,74 +418,6 @@ impl ScanStore {
             self.robot_name(mine.robot)
         ))
     }
-}
-
-fn index_u32(i: usize, what: &str) -> Result<u32> {
-    u32::try_from(i).map_err(|_| Error::InvalidArgument(format!("{what} {i} exceeds u32")))
-}
-
-type SightingGroups<'a> = BTreeMap<(usize, usize), Vec<&'a crate::sim::Sighting>>;
-
-/// Sightings grouped by (observer, stop), each group in target order; checks the indices
-/// against the robots' scan counts.
-fn group_sightings<'a>(
-    sightings: &'a [crate::sim::Sighting],
-    scan_counts: &[usize],
-) -> std::result::Result<SightingGroups<'a>, String> {
-    let mut groups: SightingGroups<'a> = BTreeMap::new();
-    for s in sightings {
-        let n = scan_counts.len();
-        if s.observer >= n || s.target >= n {
-            return Err(format!(
-                "sighting of robot {} by robot {}: there are {n} robots",
-                s.target, s.observer
-            ));
-        }
-        if s.stop >= scan_counts[s.observer] {
-            return Err(format!(
-                "sighting by robot {} at stop {}: the robot has {} scans",
-                s.observer, s.stop, scan_counts[s.observer]
-            ));
-        }
-        groups.entry((s.observer, s.stop)).or_default().push(s);
-    }
-    for g in groups.values_mut() {
-        g.sort_by_key(|s| s.target);
-    }
-    Ok(groups)
-}
-
-fn make_record(
-    robot: u32,
-    k: usize,
-    cloud: PointCloud,
-    odometry: Option<Pose>,
-    sightings: &[&crate::sim::Sighting],
-    stop_interval: f64,
-) -> Result<StoredScan> {
-    let stored = sightings
-        .iter()
-        .map(|s| {
-            Ok(StoredSighting {
-                target: index_u32(s.target, "robot index")?,
-                range: s.range,
-                bearing: s.bearing,
-                elevation: s.elevation,
-                beacon: s.beacon,
-                mutual: s.mutual,
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(StoredScan {
-        robot,
-        seq: index_u32(k, "scan number")?,
-        time: sightings
-            .first()
-            .map_or(k as f64 * stop_interval, |s| s.time),
-        odometry,
-        cloud,
-        sightings: stored,
-    })
 }
 
 // ---- checks shared by `insert` and the reader ----
@@ -890,7 +745,7 @@ fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
     }
     let body_end = r.pos();
     let stored = r.u32("checksum")?;
-    let computed = crate::io::crc32::crc32(&data[..body_end]);
+    let computed = crate::file::crc32::crc32(&data[..body_end]);
     if computed != stored {
         return Err(ParseError::Malformed(format!(
             "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is damaged"

@@ -124,7 +124,7 @@ fn failed_write_leaves_nothing_behind() {
     let dir = tempfile::tempdir().unwrap();
     let target = dir.path().join("keep.xyz");
     std::fs::write(&target, "1 2 3\n").unwrap();
-    let err = io::write_atomic(&target, "XYZ text", |w| {
+    let err = olmap::file::write_atomic(&target, "XYZ text", |w| {
         use std::io::Write;
         w.write_all(b"4 5 6\n")?;
         Err(std::io::Error::other("disk full (simulated)"))

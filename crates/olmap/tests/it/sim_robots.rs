@@ -2,12 +2,12 @@
 
 use nalgebra::{Point3, Vector3};
 use olmap::geometry::Pose;
-use olmap::io::sim_dataset::{read_dataset, write_dataset};
 use olmap::sim::{
     odometry_for, plan_trajectories, room_shell, sightings_at, simulate, Material, MotionModel,
     Object, OdometryNoise, RobotModel, Scanner3d, SightingModel, SimConfig, SimRng, SpinningLidar,
     World, WorldKind,
 };
+use olmap::sim::{read_dataset, write_dataset};
 
 /// An 8 x 6 x 3 m room, optionally with a full-height wall across it at x = 4.
 fn room(divided: bool) -> World {

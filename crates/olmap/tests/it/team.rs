@@ -151,7 +151,7 @@ fn team_mapping_of_five_simulated_runs_is_accurate() {
     let (mut errors, mut in_map, mut total) = (Vec::new(), 0, 0);
     for seed in 1..=5 {
         let data = lab(seed, 3, 5, OdometryNoise::degraded());
-        let store = ScanStore::from_sim(&data).unwrap();
+        let store = data.to_store().unwrap();
         let team = map_team(&store, &TeamParams::default(), |_, _| {}).unwrap();
         let truth = truth_list(&store, &data);
         let e = evaluate(&team.poses(), &truth).unwrap();
@@ -259,7 +259,7 @@ fn truth_list(store: &ScanStore, data: &SimDataset) -> PoseList {
 #[test]
 fn sighted_robots_are_cleared_from_the_joint_map() {
     let data = lab(1, 3, 3, OdometryNoise::none());
-    let store = ScanStore::from_sim(&data).unwrap();
+    let store = data.to_store().unwrap();
     let body = RobotModel::default();
     let on_bodies = |m: &TeamMap| {
         let mut n = 0;

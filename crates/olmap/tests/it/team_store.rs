@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
-use olmap::io::sim_dataset::{read_dataset, write_dataset};
+use olmap::sim::{read_dataset, write_dataset};
 use olmap::sim::{simulate, Scanner3d, SimConfig, SimRng, SpinningLidar, WorldKind};
 use olmap::team::{ScanStore, StoredScan, StoredSighting};
 use proptest::prelude::*;
@@ -251,7 +251,7 @@ fn a_simulated_run_becomes_records_with_their_sightings_and_round_trips() {
         !data.sightings.is_empty(),
         "the robots should see each other"
     );
-    let store = ScanStore::from_sim(&data).unwrap();
+    let store = data.to_store().unwrap();
     assert_eq!(store.len(), 6);
     assert_eq!(store.robots(), vec![0, 1]);
     assert_eq!(store.robot_name(1), data.robots[1].name);
@@ -313,7 +313,7 @@ fn a_simulated_run_becomes_records_with_their_sightings_and_round_trips() {
     // PCD and pose text files, so compare what they keep exactly).
     let dir = tmp.path().join("dataset");
     write_dataset(&dir, &data).unwrap();
-    let disk = ScanStore::from_dataset(&read_dataset(&dir).unwrap()).unwrap();
+    let disk = read_dataset(&dir).unwrap().to_store().unwrap();
     assert_eq!(disk.len(), store.len());
     for (a, b) in disk.iter().zip(store.iter()) {
         assert_eq!((a.robot, a.seq, a.time), (b.robot, b.seq, b.time));
@@ -339,7 +339,7 @@ fn patchable() -> ScanStore {
 
 fn with_crc(mut data: Vec<u8>) -> Vec<u8> {
     let n = data.len() - 4;
-    let crc = olmap::io::crc32::crc32(&data[..n]);
+    let crc = olmap::file::crc32::crc32(&data[..n]);
     data[n..].copy_from_slice(&crc.to_le_bytes());
     data
 }
@@ -411,11 +411,11 @@ fn damaged_store_files_are_refused_with_their_name() {
 }
 
 #[test]
-fn from_sim_refuses_sightings_without_a_scan() {
+fn to_store_refuses_sightings_without_a_scan() {
     let mut data = small_sim();
     let mut s = data.sightings.first().cloned().unwrap();
     s.stop = 99;
     data.sightings.push(s);
-    let err = ScanStore::from_sim(&data).unwrap_err().to_string();
+    let err = data.to_store().unwrap_err().to_string();
     assert!(err.contains("stop 99"), "{err}");
 }

@@ -51,7 +51,7 @@ impl Crc32 {
 /// The CRC-32 of a byte slice.
 ///
 /// ```
-/// assert_eq!(olmap::io::crc32::crc32(b"123456789"), 0xCBF4_3926);
+/// assert_eq!(olmap::file::crc32::crc32(b"123456789"), 0xCBF4_3926);
 /// ```
 pub fn crc32(bytes: &[u8]) -> u32 {
     let mut c = Crc32::default();

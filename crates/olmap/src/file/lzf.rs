@@ -78,7 +78,7 @@ pub enum LzfError {
 /// never reserves more memory than the input can really expand to.
 ///
 /// ```
-/// use olmap::io::lzf;
+/// use olmap::file::lzf;
 /// // A literal run "ab", then 4 bytes copied from 2 bytes back (overlapping).
 /// let stream = [1, b'a', b'b', 2 << 5, 1];
 /// assert_eq!(lzf::decompress(&stream, 6).unwrap(), b"ababab");
@@ -161,7 +161,7 @@ fn copy_back(out: &mut Vec<u8>, offset: usize, len: usize) {
 /// back-reference, anything else a literal. Incompressible input grows by 1 byte in 32.
 ///
 /// ```
-/// use olmap::io::lzf;
+/// use olmap::file::lzf;
 /// let data = b"abcabcabcabcabcabcabcabc".repeat(10);
 /// let packed = lzf::compress(&data);
 /// assert!(packed.len() < data.len());

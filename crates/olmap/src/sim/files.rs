@@ -26,9 +26,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::Sighting;
 use crate::error::{Error, ParseError, Result};
 use crate::geometry::PoseList;
-use crate::sim::Sighting;
 
 /// The `format` value of a dataset manifest.
 pub const DATASET_FORMAT: &str = "olmap-sim-dataset";
@@ -287,7 +287,7 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
 /// Writes a simulated dataset into `dir`, which must not exist or be empty. The folder is
 /// written under a temporary name beside it and renamed when complete: it appears whole
 /// or not at all. Same dataset, same bytes.
-pub fn write_dataset(dir: impl AsRef<Path>, data: &crate::sim::SimDataset) -> Result<()> {
+pub fn write_dataset(dir: impl AsRef<Path>, data: &super::SimDataset) -> Result<()> {
     let dir = dir.as_ref();
     if dir.exists() {
         let empty = std::fs::read_dir(dir)
@@ -322,12 +322,12 @@ pub fn write_dataset(dir: impl AsRef<Path>, data: &crate::sim::SimDataset) -> Re
     result
 }
 
-fn write_dataset_into(dir: &Path, data: &crate::sim::SimDataset) -> Result<()> {
+fn write_dataset_into(dir: &Path, data: &super::SimDataset) -> Result<()> {
     let mkdir = |p: &Path| std::fs::create_dir_all(p).map_err(|e| Error::io(p, e));
     mkdir(dir)?;
-    let options = super::WriteOptions {
-        format: Some(super::CloudFormat::Pcd),
-        pcd_encoding: super::PcdEncoding::Binary,
+    let options = crate::io::WriteOptions {
+        format: Some(crate::io::CloudFormat::Pcd),
+        pcd_encoding: crate::io::PcdEncoding::Binary,
         ..Default::default()
     };
     let mut robots = Vec::new();
@@ -347,7 +347,7 @@ fn write_dataset_into(dir: &Path, data: &crate::sim::SimDataset) -> Result<()> {
         };
         for (k, cloud) in robot.scans.iter().enumerate() {
             let rel = format!("{}/scans/{}.pcd", robot.name, scan_name(k));
-            super::write_cloud(dir.join(&rel), cloud, &options)?;
+            crate::io::write_cloud(dir.join(&rel), cloud, &options)?;
             files.scans.push(rel);
             truth.push(scan_name(k), robot.truth[k]);
             odometry.push(scan_name(k), robot.odometry[k]);
@@ -359,7 +359,7 @@ fn write_dataset_into(dir: &Path, data: &crate::sim::SimDataset) -> Result<()> {
         }
         for (k, scan) in robot.scans2d.iter().enumerate() {
             let rel = format!("{}/scans2d/{}.csv", robot.name, scan_name(k));
-            super::write_atomic(&dir.join(&rel), "laser scan CSV", |w| scan.write_csv(w))?;
+            crate::file::write_atomic(&dir.join(&rel), "laser scan CSV", |w| scan.write_csv(w))?;
             files.scans2d.push(rel);
         }
         if !robot.raw_logs.is_empty() {
@@ -367,12 +367,12 @@ fn write_dataset_into(dir: &Path, data: &crate::sim::SimDataset) -> Result<()> {
         }
         for (k, log) in robot.raw_logs.iter().enumerate() {
             let rel = format!("{}/raw/{}.mirror", robot.name, scan_name(k));
-            super::write_atomic(&dir.join(&rel), "mirror log", |w| log.write(w))?;
+            crate::file::write_atomic(&dir.join(&rel), "mirror log", |w| log.write(w))?;
             files.raw_logs.push(rel);
         }
         robots.push(files);
     }
-    super::write_atomic(&dir.join("sightings.csv"), "sightings CSV", |w| {
+    crate::file::write_atomic(&dir.join("sightings.csv"), "sightings CSV", |w| {
         write_sightings(w, &data.sightings)
     })?;
     let manifest = DatasetManifest {
@@ -387,7 +387,7 @@ fn write_dataset_into(dir: &Path, data: &crate::sim::SimDataset) -> Result<()> {
         robots,
         sightings: "sightings.csv".into(),
     };
-    super::write_atomic(&dir.join("manifest.json"), "dataset manifest", |w| {
+    crate::file::write_atomic(&dir.join("manifest.json"), "dataset manifest", |w| {
         serde_json::to_writer_pretty(&mut *w, &manifest).map_err(std::io::Error::other)?;
         writeln!(w)
     })

@@ -1,0 +1,16 @@
+//! File plumbing every layer uses: atomic writes, buffered opening, text-line and byte
+//! cursors, CRC-32 and LZF. This is the bottom layer of the crate: it imports nothing but
+//! [`crate::error`], and the formats in [`crate::io`], the map files in
+//! [`crate::occupancy`], the stores in [`crate::team`] and the pictures in
+//! [`crate::render`] all build on it.
+
+mod atomic;
+pub mod crc32;
+pub(crate) mod cursor;
+pub mod lzf;
+mod read;
+pub(crate) mod text;
+
+pub use atomic::write_atomic;
+pub(crate) use read::parse_file;
+pub use read::{open_buffered, read_bytes};
