@@ -57,3 +57,39 @@ pub fn set_threads(threads: usize) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Progress bars for a library pipeline's stages: one bar per stage, shown while it runs
+/// (hidden when `quiet` or stderr is not a terminal).
+pub struct StageBars {
+    quiet: bool,
+    current: Option<(olmap::progress::Stage, ProgressBar)>,
+}
+
+impl StageBars {
+    /// No bar yet.
+    pub fn new(quiet: bool) -> Self {
+        StageBars {
+            quiet,
+            current: None,
+        }
+    }
+
+    /// Moves the bar of `stage` to `done` of `total`, starting it (and clearing the last
+    /// stage's) when the stage changes.
+    pub fn update(&mut self, stage: olmap::progress::Stage, done: usize, total: usize) {
+        if self.current.as_ref().map(|c| c.0) != Some(stage) {
+            self.finish();
+            self.current = Some((stage, progress(total as u64, stage.label(), self.quiet)));
+        }
+        if let Some((_, bar)) = &self.current {
+            bar.set_position(done as u64);
+        }
+    }
+
+    /// Clears the last bar.
+    pub fn finish(&mut self) {
+        if let Some((_, bar)) = self.current.take() {
+            bar.finish_and_clear();
+        }
+    }
+}

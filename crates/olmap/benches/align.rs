@@ -9,7 +9,7 @@ use divan::Bencher;
 use olmap::align::icp::{refine, IcpParams};
 use olmap::align::{self, Dof, RegisterParams, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
-use olmap::geometry::{Pose, PoseError, PoseList};
+use olmap::geometry::{Pose, PoseError};
 use olmap::io::{self, ReadOptions};
 
 fn main() {
@@ -36,7 +36,7 @@ fn pairs() -> &'static [Pair] {
                     .cloud
             })
             .collect();
-        let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+        let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
         let rel = |s: usize, t: usize| refs.poses[t].pose.inverse() * refs.poses[s].pose;
         let car = |n: &str| {
             io::read_cloud(d.join("libpointmatcher_car").join(n))

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use divan::counter::ItemsCount;
 use divan::Bencher;
 use olmap::cloud::PointCloud;
-use olmap::geometry::{Pose, PoseList};
+use olmap::geometry::Pose;
 use olmap::io::{self, ReadOptions};
 use olmap::occupancy::{OccupancyList, SensorModel};
 
@@ -26,7 +26,7 @@ fn datasets() -> &'static [Dataset] {
         let Some(dir) = olmap::test_data::dir() else {
             return Vec::new();
         };
-        let refs = PoseList::read_path(dir.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+        let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
         let valid = ReadOptions {
             uos_valid_only: true,
             ..Default::default()

@@ -117,7 +117,36 @@ pub enum Error {
         /// What was wrong.
         reason: String,
     },
-    /// A parameter or request that cannot be honoured.
+    /// An input that must hold something held nothing (an empty cloud, map or scan
+    /// list): the caller may wait for more data or ask for another input.
+    #[error("empty input: {what}")]
+    EmptyInput {
+        /// What was empty.
+        what: String,
+    },
+    /// A request beyond a limit olmap enforces (memory, threads, sizes): the caller may
+    /// retry with a smaller request.
+    #[error("too large: {what} (limit {limit})")]
+    TooLarge {
+        /// What was too large, with its size.
+        what: String,
+        /// The limit, with its unit.
+        limit: String,
+    },
+    /// A valid request olmap does not support (a format variant, a mode combination).
+    #[error("unsupported: {what}")]
+    Unsupported {
+        /// What is not supported.
+        what: String,
+    },
+    /// A name looked up in a file or a set was not there (a scan without a pose).
+    #[error("{what}: not found")]
+    NotFound {
+        /// What was looked up, and where.
+        what: String,
+    },
+    /// A parameter or request that cannot be honoured (a bad value, a contradiction
+    /// between parameters).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
 }

@@ -40,17 +40,22 @@ pub mod beacon;
 pub mod cloud;
 pub mod error;
 pub mod file;
+#[cfg(any(test, feature = "test-support"))]
 pub mod fixtures;
 pub mod geometry;
 pub mod grid2d;
 pub mod io;
 pub mod mapping;
 pub mod occupancy;
+pub mod progress;
+#[cfg(feature = "render")]
 pub mod render;
+#[cfg(feature = "render")]
 pub mod report;
 pub mod scanner;
 pub mod sim;
 pub mod team;
+#[cfg(any(test, feature = "test-support"))]
 pub mod test_data;
 
 pub use error::{Error, ParseError, Result};

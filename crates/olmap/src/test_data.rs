@@ -33,3 +33,39 @@ pub fn dir() -> Option<PathBuf> {
     );
     None
 }
+
+/// The 3DTK indoor scans' folder (`DATA/3dtk_dat`), or `None` as [`dir`].
+pub fn threedtk_dir() -> Option<PathBuf> {
+    dir().map(|d| d.join("3dtk_dat"))
+}
+
+/// The reference poses `T_map_scan` of the 3DTK scans (`reference_poses_rh_m.txt`:
+/// right-handed metres, named `scan000` ...), or `None` as [`dir`].
+///
+/// # Panics
+/// When the file is there but does not read (the shared data is broken).
+pub fn threedtk_reference() -> Option<crate::geometry::PoseList> {
+    let path = threedtk_dir()?.join("reference_poses_rh_m.txt");
+    Some(
+        crate::geometry::PoseList::read_path(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+}
+
+/// 3DTK scan `index` (`scanNNN.3d`) as a right-handed cloud in metres, with only the
+/// valid returns (20-3270 cm) when `valid_only`; `None` as [`dir`].
+///
+/// # Panics
+/// When the file is there but does not read.
+pub fn threedtk_scan(index: usize, valid_only: bool) -> Option<crate::cloud::PointCloud> {
+    let path = threedtk_dir()?.join(format!("scan{index:03}.3d"));
+    let options = crate::io::ReadOptions {
+        uos_valid_only: valid_only,
+        ..Default::default()
+    };
+    Some(
+        crate::io::read_cloud_with(&path, &options)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .cloud,
+    )
+}

@@ -8,7 +8,7 @@ use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
 use olmap::align::{self, Dof, Region, RegisterParams, Registration, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
-use olmap::geometry::{Pose, PoseList};
+use olmap::geometry::Pose;
 use olmap::io::{self, ReadOptions};
 use olmap::occupancy::{self, MapFormat};
 use serde_json::json;
@@ -101,8 +101,7 @@ fn read_cloud(path: &Path, valid: bool) -> anyhow::Result<PointCloud> {
 
 fn guess(s: &str) -> anyhow::Result<Pose> {
     if Path::new(s).exists() {
-        let mut list = PoseList::default();
-        super::poses::read_any(Path::new(s), false, &mut list)?;
+        let list = io::read_poses(s)?;
         return list
             .poses
             .first()

@@ -1,26 +1,14 @@
-//! `olmap demo`: the main job on built-in generated data.
-//!
-//! Simulates a team of robots in the lab world (thesis §6.5: four robots with rotating-
-//! mirror 3D scanners and beacons, stop-and-scan, odometry degraded to about 0.5 m / 10°),
-//! writes the dataset, merges the robots' scan stores, maps them as a team (sightings
-//! confining the searches, seen robots cleared) and every robot alone, compares both with
-//! the ground truth (the thesis' Figure 6.11 in the report) and writes the joint map
-//! (`team.olm`, `.ply`, `.bt`), the poses and `report.json`.
+//! `olmap demo`: the main job on built-in generated data, through the library's
+//! [`olmap::sim::run_demo`]: simulate a team in the lab world, map it as a team and every
+//! robot alone, compare both with the ground truth, write maps, poses and reports.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
-use anyhow::{ensure, Context};
 use clap::Args;
-use olmap::geometry::PoseList;
-use olmap::sim::{read_dataset, write_dataset};
-use olmap::sim::{simulate, OdometryNoise, SimConfig, WorldKind};
-use olmap::team::{scan_name, ScanStore, TeamParams};
-use serde_json::json;
+use olmap::sim::{run_demo, DemoConfig};
 
-use super::team::run_pipeline;
-use crate::args::progress;
+use crate::args::StageBars;
 
 /// Arguments of `olmap demo`.
 #[derive(Args)]
@@ -43,82 +31,22 @@ pub struct DemoArgs {
     pub json: bool,
 }
 
-/// Removes `dir` only if it is a dataset an earlier demo wrote (its manifest reads as one).
-fn clear_old_dataset(dir: &Path) -> anyhow::Result<()> {
-    if !dir.exists() {
-        return Ok(());
-    }
-    read_dataset(dir).with_context(|| {
-        format!(
-            "{} exists and is not an olmap dataset; not touching it",
-            dir.display()
-        )
-    })?;
-    std::fs::remove_dir_all(dir).with_context(|| format!("cannot remove {}", dir.display()))
-}
-
 /// Runs `olmap demo`.
 pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
-    ensure!(
-        args.robots >= 1 && args.scans_per_robot >= 2,
-        "the demo needs at least one robot and two scans per robot"
-    );
-    let start = Instant::now();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let config = SimConfig {
-        world: WorldKind::Lab,
-        seed: args.seed,
+    let config = DemoConfig {
+        out: args.out.clone(),
         robots: args.robots,
-        stops: args.scans_per_robot,
-        odometry: OdometryNoise::degraded(),
-        ..Default::default()
+        scans_per_robot: args.scans_per_robot,
+        seed: args.seed,
     };
-    let total = (args.robots * args.scans_per_robot) as u64;
-    let bar = progress(total, "simulate", args.json);
-    let data = simulate(&config, |done, _| bar.set_position(done as u64))?;
-    bar.finish_and_clear();
-    let dataset_dir = args.out.join("dataset");
-    clear_old_dataset(&dataset_dir)?;
-    write_dataset(&dataset_dir, &data)?;
-    let sim_seconds = start.elapsed().as_secs_f64();
-
-    // Every robot's own store, merged as the robots would when they meet (§6.3.2).
-    let all = data.to_store()?;
-    let mut store = ScanStore::new();
-    for r in all.robots() {
-        store.merge(&all.robot_store(r))?;
-    }
-    ensure!(
-        store == all,
-        "the merged robot stores differ from the whole"
-    );
-    let mut truth = PoseList::default();
-    for (r, robot) in data.robots.iter().enumerate() {
-        for (k, t) in robot.truth.iter().enumerate() {
-            truth.push(scan_name(&store, r as u32, k as u32), *t);
-        }
-    }
-    let report = run_pipeline(
-        &store,
-        Some(&truth),
-        &TeamParams::default(),
-        &args.out,
-        true,
-        args.json,
-    )?;
-    let seconds = start.elapsed().as_secs_f64();
-    let mutual = data.sightings.iter().filter(|s| s.mutual).count();
+    let mut bars = StageBars::new(args.json);
+    let demo = run_demo(&config, &mut |stage, done, total| {
+        bars.update(stage, done, total)
+    })?;
+    bars.finish();
+    let r = &demo.report;
     if args.json {
-        let mut v = report.json;
-        v["dataset"] = json!(dataset_dir.display().to_string());
-        v["world"] = json!("lab");
-        v["seed"] = json!(args.seed);
-        v["sightings"] = json!(data.sightings.len());
-        v["mutual_sightings"] = json!(mutual);
-        v["simulate_seconds"] = json!(sim_seconds);
-        v["total_seconds"] = json!(seconds);
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(r)?);
     } else {
         println!(
             "olmap demo: {} robots x {} stops in a simulated 20 x 20 m lab (seed {}), enhanced \
@@ -127,16 +55,16 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         );
         println!(
             "  dataset -> {} ({} sightings, {} of them mutual) in {:.1} s\n",
-            dataset_dir.display(),
-            data.sightings.len(),
-            mutual,
-            sim_seconds
+            demo.dataset_dir.display(),
+            r.sightings,
+            r.mutual_sightings,
+            r.simulate_seconds
         );
         println!(
             "  position error of every scan against the ground truth, team vs each robot alone:"
         );
-        print!("{}", report.table);
-        println!("  done in {seconds:.1} s");
+        print!("{}", super::team::table(&demo.run, &args.out));
+        println!("  done in {:.1} s", r.total_seconds);
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -6,7 +6,6 @@ pub mod bench;
 pub mod convert;
 pub mod demo;
 pub mod grid2d;
-pub mod html;
 pub mod info;
 pub mod map;
 pub mod mapping;

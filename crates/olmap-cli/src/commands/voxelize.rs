@@ -82,7 +82,7 @@ fn poses_for(a: &VoxelizeArgs) -> anyhow::Result<Vec<Pose>> {
     };
     let mut list = PoseList::default();
     for f in files.split(',') {
-        super::poses::read_any(Path::new(f), false, &mut list)?;
+        list.poses.extend(olmap::io::read_poses(f)?.poses);
     }
     let mut out = Vec::new();
     for c in &a.clouds {

@@ -12,6 +12,7 @@ mod frames_3dtk;
 mod metrics;
 mod pose;
 pub mod pose_file;
+mod pose_json;
 
 pub use aabb::Aabb;
 pub use euler::{rotation_from_yaw_pitch_roll, wrap_angle, yaw_pitch_roll_from_rotation};
@@ -22,6 +23,7 @@ pub use frames_3dtk::{
 pub use metrics::PoseError;
 pub use pose::Pose;
 pub use pose_file::{NamedPose, PoseList};
+pub use pose_json::{NamedPoseJson, PoseJson};
 
 mod voxel;
 pub use voxel::VoxelKey;

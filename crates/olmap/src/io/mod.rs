@@ -21,10 +21,12 @@
 //! and rename it into place, so a failed write never leaves a half-written file.
 
 pub mod csv;
+mod discover;
 pub mod kitti;
 pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
+mod poses;
 pub mod scan_graph;
 pub mod slam6d;
 pub mod uos;
@@ -33,6 +35,9 @@ pub mod xyz;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
+
+pub use discover::{is_cloud_file, scan_files};
+pub use poses::{file_stem_name, read_poses, read_poses_with};
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, ParseError, Result};

@@ -1,9 +1,15 @@
-//! Map building from many scans (thesis §6.4.1, §5.4, Algorithm 8) and evaluation against
-//! reference poses.
+//! Map building from many scans (thesis §6.4.1, §5.4, Algorithm 8), evaluation against
+//! reference poses, and the `olmap map` pipeline from files to map and report
+//! ([`run_map_job`], [`MapReport`]).
 
 mod builder;
 mod eval;
+#[cfg(feature = "render")]
+mod html;
+mod input;
 mod links;
+mod pipeline;
+mod report;
 
 pub use builder::{
     build_map, build_map_linked, fuse_scan_maps, MapBuild, MapMode, MapParams, PlacedScan,
@@ -13,4 +19,12 @@ pub use eval::{
     evaluate, mean_median_max, position_histogram, ErrorSummary, Evaluation, HistogramBin,
     ScanError, EVAL_THRESHOLDS_DEG, EVAL_THRESHOLDS_M,
 };
+#[cfg(feature = "render")]
+pub use html::write_map_html;
+pub use input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 pub use links::{Placement, ScanLink, TeamLinks};
+pub use pipeline::{run_map_job, MapJob, MapRun};
+pub use report::{
+    EvalReport, EvalSummaryReport, MapReport, MeanMedianMax, PlacedReport, RejectedReport,
+    ScanErrorReport, ShareAbove,
+};

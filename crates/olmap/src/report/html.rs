@@ -108,7 +108,7 @@ impl HtmlReport {
     }
 
     /// A JSON value shown pretty-printed (e.g. the run's parameters).
-    pub fn json(&mut self, value: &serde_json::Value) -> &mut Self {
+    pub fn json(&mut self, value: &impl serde::Serialize) -> &mut Self {
         let text = serde_json::to_string_pretty(value).unwrap_or_default();
         self.body
             .push_str(&format!("<pre>{}</pre>\n", escape(&text)));

@@ -5,6 +5,7 @@
 
 mod benchmark;
 mod dataset;
+mod demo;
 pub mod files;
 mod rng;
 mod robot;
@@ -17,6 +18,7 @@ mod worlds;
 
 pub use benchmark::{thesis_localisation, LocalisationBenchmark, THESIS_RESOLUTION};
 pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
+pub use demo::{run_demo, DemoConfig, DemoReport, DemoRun};
 pub use files::{read_dataset, write_dataset, DatasetOnDisk};
 pub use rng::{mix64, SimRng};
 pub use robot::{

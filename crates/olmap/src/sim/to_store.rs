@@ -8,8 +8,8 @@ use super::files::DatasetOnDisk;
 use super::{Sighting, SimDataset};
 use crate::cloud::PointCloud;
 use crate::error::{Error, ParseError, Result};
-use crate::geometry::Pose;
-use crate::team::{ScanStore, StoredScan, StoredSighting};
+use crate::geometry::{Pose, PoseList};
+use crate::team::{scan_name, ScanStore, StoredScan, StoredSighting};
 
 impl SimDataset {
     /// One store holding every robot's records of a simulated run: robot `r`'s scan at
@@ -158,4 +158,32 @@ fn make_record(
         cloud,
         sightings: stored,
     })
+}
+
+impl SimDataset {
+    /// The ground truth `T_world_scan` of every scan, named as the team map names them
+    /// ([`crate::team::scan_name`] in `store`, the store made by [`SimDataset::to_store`]).
+    pub fn truth_list(&self, store: &ScanStore) -> PoseList {
+        let mut truth = PoseList::default();
+        for (r, robot) in self.robots.iter().enumerate() {
+            for (k, t) in robot.truth.iter().enumerate() {
+                truth.push(scan_name(store, r as u32, k as u32), *t);
+            }
+        }
+        truth
+    }
+}
+
+impl DatasetOnDisk {
+    /// The ground truth of every scan on disk, named as the team map names them (see
+    /// [`SimDataset::truth_list`]).
+    pub fn truth_list(&self, store: &ScanStore) -> PoseList {
+        let mut truth = PoseList::default();
+        for (r, list) in self.truth.iter().enumerate() {
+            for (k, p) in list.poses.iter().enumerate() {
+                truth.push(scan_name(store, r as u32, k as u32), p.pose);
+            }
+        }
+        truth
+    }
 }

@@ -4,14 +4,22 @@
 //! (§6.4-6.5) with its solo counterpart.
 
 mod clearing;
+#[cfg(feature = "render")]
+mod html;
 mod mapper;
 mod mutual;
+mod pipeline;
+pub mod report;
 mod store;
 
 pub use clearing::{clear_robots, ClearingParams};
+#[cfg(feature = "render")]
+pub use html::write_team_html;
 pub use mapper::{map_solo, map_team, scan_name, RobotFrame, TeamMap, TeamParams};
 pub use mutual::{
     expected_position_error, mutual_from_scans, mutual_pose, separations, MutualFix,
     MutualObservation, MutualParams, MutualReject,
 };
+pub use pipeline::{run_team_pipeline, TeamJob, TeamRun};
+pub use report::{SoloRun, TeamReport, TEAM_REPORT_FORMAT, TEAM_REPORT_VERSION};
 pub use store::{ScanStore, StoredScan, StoredSighting, STORE_MAGIC, STORE_VERSION};

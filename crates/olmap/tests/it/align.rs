@@ -4,19 +4,13 @@
 use olmap::align::icp::IcpParams;
 use olmap::align::{self, Dof, RegisterParams, Registration, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
-use olmap::geometry::{Pose, PoseError, PoseList};
-use olmap::io::{self, ReadOptions};
+use olmap::geometry::{Pose, PoseError};
+use olmap::io;
 
 use crate::data;
 
-fn tdk(d: &std::path::Path, i: usize) -> PointCloud {
-    let valid = ReadOptions {
-        uos_valid_only: true,
-        ..Default::default()
-    };
-    io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
-        .unwrap()
-        .cloud
+fn tdk(i: usize) -> PointCloud {
+    olmap::test_data::threedtk_scan(i, true).expect("the data folder was found")
 }
 
 fn car(d: &std::path::Path, name: &str) -> PointCloud {
@@ -57,9 +51,11 @@ fn threedtk_pairs_register_globally() {
 }
 
 fn threedtk_pairs_register_globally_in(mode: SearchMode) {
-    let Some(d) = data() else { return };
-    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
-    let scans: Vec<PointCloud> = (0..3).map(|i| tdk(&d, i)).collect();
+    if data().is_none() {
+        return;
+    }
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
+    let scans: Vec<PointCloud> = (0..3).map(tdk).collect();
     for (src, dst) in [(1usize, 0usize), (2, 0), (2, 1)] {
         let reference = refs.poses[dst].pose.inverse() * refs.poses[src].pose;
         let r = align::register(&scans[src], &scans[dst], &params_in(Dof::XyzYaw, mode)).unwrap();
@@ -101,9 +97,11 @@ fn exact_search_registers_the_3dtk_pairs_globally() {
 /// z, ±5° in heading, centred 0.23 m and 2° off the reference pose.
 #[test]
 fn exact_search_scores_at_least_the_multi_resolution_search() {
-    let Some(d) = data() else { return };
-    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
-    let scans: Vec<PointCloud> = (0..3).map(|i| tdk(&d, i)).collect();
+    if data().is_none() {
+        return;
+    }
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
+    let scans: Vec<PointCloud> = (0..3).map(tdk).collect();
     for (src, dst) in [(1usize, 0usize), (2, 0), (2, 1)] {
         let reference = refs.poses[dst].pose.inverse() * refs.poses[src].pose;
         let mut p = params_in(Dof::XyzYaw, SearchMode::MultiResolution);
@@ -223,7 +221,7 @@ fn exact_search_registers_the_car_pair_in_six_dof_in_a_window() {
 fn unrelated_scenes_are_not_trusted() {
     let Some(d) = data() else { return };
     let outdoor = car(&d, "car_cloud400.csv");
-    let indoor = tdk(&d, 0);
+    let indoor = tdk(0);
     let office = io::read_cloud(d.join("octomap_share_data/scan.dat"))
         .unwrap()
         .cloud;
@@ -240,8 +238,10 @@ fn unrelated_scenes_are_not_trusted() {
 
 #[test]
 fn same_input_same_output_on_any_thread_count() {
-    let Some(d) = data() else { return };
-    let (a, b) = (tdk(&d, 1), tdk(&d, 0));
+    if data().is_none() {
+        return;
+    }
+    let (a, b) = (tdk(1), tdk(0));
     let p = params(Dof::XyzYaw);
     let many = align::register(&a, &b, &p).unwrap();
     let one = rayon::ThreadPoolBuilder::new()

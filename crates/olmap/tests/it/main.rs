@@ -7,10 +7,12 @@ mod bad_input;
 mod beacon;
 mod fuzz;
 mod grid2d;
+mod layers;
 mod mapping;
 mod mutual;
 mod occupancy;
 mod real_data;
+#[cfg(feature = "render")]
 mod render;
 mod round_trip;
 mod scanner;

@@ -10,12 +10,8 @@ fn threedtk(d: &std::path::Path, odometry: bool) -> Vec<ScanInput> {
     olmap::fixtures::threedtk_scans(d, odometry).unwrap()
 }
 
-fn check_against_reference(
-    d: &std::path::Path,
-    placed: &[olmap::mapping::PlacedScan],
-    label: &str,
-) {
-    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+fn check_against_reference(placed: &[olmap::mapping::PlacedScan], label: &str) {
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
     for p in placed {
         let reference = refs.poses[p.index].pose;
         let e = PoseError::between(&p.pose, &reference);
@@ -51,11 +47,7 @@ fn threedtk_batch_map_with_and_without_odometry() {
             m.map.len()
         );
         assert_eq!(m.placed.len(), 3, "{:?}", m.rejected);
-        check_against_reference(
-            &d,
-            &m.placed,
-            if odometry { "odometry" } else { "no odometry" },
-        );
+        check_against_reference(&m.placed, if odometry { "odometry" } else { "no odometry" });
         assert!(m.map.len() > 10_000);
         // The scan-pose pairs rebuild the map: every rebuilt voxel lies within one cell
         // (re-binning) of a voxel of the ray-traced map, but for the few the other scans
@@ -128,14 +120,14 @@ fn a_foreign_scan_is_rejected_with_a_reason() {
                 p.index -= 1;
             }
         }
-        check_against_reference(&d, &fixed, &format!("{mode:?} with a foreign scan"));
+        check_against_reference(&fixed, &format!("{mode:?} with a foreign scan"));
     }
 }
 
 #[test]
 fn evaluation_of_the_reference_against_itself_and_the_odometry() {
     let Some(d) = data() else { return };
-    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
     let same = evaluate(&refs, &refs).unwrap();
     assert!(same.summary.translation_m[2] < 1e-9);
     let mut odo = PoseList::default();

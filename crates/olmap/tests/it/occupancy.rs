@@ -4,8 +4,8 @@ use std::collections::HashSet;
 
 use nalgebra::Point3;
 use olmap::cloud::PointCloud;
-use olmap::geometry::{Pose, PoseList, VoxelKey};
-use olmap::io::{self, ReadOptions};
+use olmap::geometry::{Pose, VoxelKey};
+use olmap::io;
 use olmap::occupancy::{OccupancyList, Pyramid, SensorModel, VoxelRay};
 use proptest::prelude::*;
 
@@ -230,17 +230,9 @@ fn pyramid_updated_incrementally_equals_rebuilt() {
 #[test]
 fn real_scans_voxelise_with_ray_tracing() {
     let Some(d) = data() else { return };
-    let valid = ReadOptions {
-        uos_valid_only: true,
-        ..Default::default()
-    };
-    let refs = PoseList::read_path(d.join("3dtk_dat/reference_poses_rh_m.txt")).unwrap();
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
     let scans: Vec<PointCloud> = (0..3)
-        .map(|i| {
-            io::read_cloud_with(d.join(format!("3dtk_dat/scan00{i}.3d")), &valid)
-                .unwrap()
-                .cloud
-        })
+        .map(|i| olmap::test_data::threedtk_scan(i, true).expect("the data folder was found"))
         .collect();
     let dat = io::read_cloud(d.join("octomap_share_data/scan.dat"))
         .unwrap()

@@ -1,0 +1,105 @@
+//! [`run_map_job`]: the whole `olmap map` pipeline — read the scan files with their
+//! odometry, build the map, write the map, the poses, the scans' own lists and the
+//! reports — for every front end to call.
+
+use std::path::PathBuf;
+
+use super::input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
+use super::{build_map, MapBuild, MapParams, MapReport};
+use crate::error::{Error, Result};
+use crate::file::write_atomic;
+use crate::geometry::PoseList;
+use crate::io::ReadOptions;
+use crate::occupancy::{self, MapFormat};
+use crate::progress::{Progress, Stage};
+
+/// What to map and where the results go.
+#[derive(Debug, Clone)]
+pub struct MapJob {
+    /// The scan files, in input order (see [`crate::io::scan_files`]).
+    pub scans: Vec<PathBuf>,
+    /// Their odometry.
+    pub odometry: OdometrySource,
+    /// How the scan files are read.
+    pub read: ReadOptions,
+    /// The scan defining the map frame, by name (default: [`MapParams::first`]).
+    pub first: Option<String>,
+    /// The mapping parameters.
+    pub params: MapParams,
+    /// The map file (`.olm` or `.bt`).
+    pub output: PathBuf,
+    /// Where to write the scan poses `T_map_scan` as a pose list.
+    pub poses_out: Option<PathBuf>,
+    /// A folder for each placed scan's own list (`NAME.olm`) and `poses.txt`; needs
+    /// [`MapParams::keep_scan_maps`].
+    pub scans_out: Option<PathBuf>,
+    /// Where to write the JSON report; the HTML report goes beside it (with the `render`
+    /// feature).
+    pub report: Option<PathBuf>,
+}
+
+/// What [`run_map_job`] built and reported.
+#[derive(Debug, Clone)]
+pub struct MapRun {
+    /// The build.
+    pub build: MapBuild,
+    /// Its report (also written to [`MapJob::report`] when set).
+    pub report: MapReport,
+    /// The placed scans' poses.
+    pub poses: PoseList,
+}
+
+/// Runs a [`MapJob`]: reads the scans ([`Stage::Read`]), builds the map ([`Stage::Map`]),
+/// writes every requested output atomically. Errors name the file or scan at fault; an
+/// output that is not a map file is refused before anything is read.
+pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
+    if MapFormat::from_path(&job.output).is_none() {
+        return Err(Error::InvalidArgument(format!(
+            "{}: the output must be a map file (.olm or .bt)",
+            job.output.display()
+        )));
+    }
+    let odometry = odometry_for(&job.odometry, &job.scans)?;
+    let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
+    let mut params = job.params.clone();
+    if let Some(name) = &job.first {
+        params.first = scan_index(&scans, name)?;
+    }
+    let build = build_map(&scans, &params, |done, total| {
+        progress(Stage::Map, done, total)
+    })?;
+    occupancy::write_map(&job.output, &build.map)?;
+    let mut poses = PoseList::default();
+    for p in &build.placed {
+        poses.push(p.name.clone(), p.pose);
+    }
+    if let Some(out) = &job.poses_out {
+        poses.write_path(out)?;
+    }
+    if let Some(dir) = &job.scans_out {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        for s in &build.scan_maps {
+            s.voxels
+                .write_olm_path(dir.join(format!("{}.olm", s.name)))?;
+        }
+        poses.write_path(dir.join("poses.txt"))?;
+    }
+    let report = MapReport::new(
+        &build,
+        scans.len(),
+        params.register.search.resolution,
+        &job.output.display().to_string(),
+    );
+    if let Some(path) = &job.report {
+        write_atomic(path, "JSON report", |w| {
+            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
+        })?;
+        #[cfg(feature = "render")]
+        super::html::write_map_html(&build, &report, params.sensor.max_range, path)?;
+    }
+    Ok(MapRun {
+        build,
+        report,
+        poses,
+    })
+}
