@@ -3,7 +3,9 @@
 use std::io::IsTerminal;
 
 use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use olmap::align::Dof;
 use olmap::geometry::Pose;
 
 /// Parses `N` comma-separated finite numbers.
@@ -92,4 +94,48 @@ impl StageBars {
             bar.finish_and_clear();
         }
     }
+}
+
+/// Degrees of freedom on the command line.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum DofArg {
+    /// x, y, yaw (z, roll, pitch from the prior: guess or odometry).
+    XyYaw,
+    /// x, y, z, yaw (roll, pitch from the prior: gravity-aligned robots).
+    XyzYaw,
+    /// All six; roll and pitch within --max-tilt of the prior.
+    #[value(name = "6dof")]
+    SixDof,
+}
+
+/// The degrees of freedom a registration searches (`olmap align`, `localize`, `map`).
+#[derive(Args)]
+pub struct DofArgs {
+    /// Degrees of freedom searched by each registration.
+    #[arg(long, value_enum, default_value = "xyz-yaw")]
+    pub dof: DofArg,
+    /// 6dof: largest roll and pitch searched away from the prior, degrees.
+    #[arg(long, default_value_t = 15.0)]
+    pub max_tilt: f64,
+}
+
+impl DofArgs {
+    /// The library's degrees of freedom.
+    pub fn dof(&self) -> Dof {
+        match self.dof {
+            DofArg::XyYaw => Dof::XyYaw,
+            DofArg::XyzYaw => Dof::XyzYaw,
+            DofArg::SixDof => Dof::SixDof {
+                max_tilt: self.max_tilt.to_radians(),
+            },
+        }
+    }
+}
+
+/// The worker-thread count of a command.
+#[derive(Args)]
+pub struct ThreadsArgs {
+    /// Worker threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }

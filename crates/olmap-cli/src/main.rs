@@ -34,9 +34,9 @@ enum Command {
     /// Build an occupancy-list map from point clouds (endpoints or ray tracing).
     Voxelize(commands::voxelize::VoxelizeArgs),
     /// Write a map as another map format or as a cloud of voxel centres.
-    Export(commands::map::ExportArgs),
+    Export(commands::export::ExportArgs),
     /// Merge maps of the same resolution (counts add).
-    Merge(commands::map::MergeArgs),
+    Merge(commands::merge::MergeArgs),
     /// Register a scan onto another scan with no initial guess (multi-resolution search,
     /// then ICP); prints T_target_source and whether to trust it.
     Align(commands::align::AlignArgs),
@@ -44,9 +44,9 @@ enum Command {
     Localize(commands::align::AlignArgs),
     /// Build a map from many scans (batch best-overlap-first or sequential), with optional
     /// odometry; writes the map, the scan poses and a report.
-    Map(commands::mapping::MapArgs),
+    Map(commands::map::MapArgs),
     /// Compare estimated poses with reference poses (per scan and summaries).
-    Eval(commands::mapping::EvalArgs),
+    Eval(commands::eval::EvalArgs),
     /// Print pose files (3DTK .pose/.frames, CSV pose tables, pose lists) in metres and
     /// degrees, or convert them to an olmap pose list.
     Poses(commands::poses::PosesArgs),
@@ -79,10 +79,10 @@ enum Command {
     Render(commands::render::RenderArgs),
     /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
     /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).
-    Navgrid(commands::render::NavgridArgs),
+    Navgrid(commands::navgrid::NavgridArgs),
     /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
     /// segment.
-    Query(commands::render::QueryArgs),
+    Query(commands::query::QueryArgs),
 }
 
 fn main() -> ExitCode {
@@ -91,12 +91,12 @@ fn main() -> ExitCode {
         Command::Info(a) => commands::info::run(&a),
         Command::Convert(a) => commands::convert::run(&a),
         Command::Poses(a) => commands::poses::run(&a),
-        Command::Map(a) => commands::mapping::run_map(&a),
-        Command::Eval(a) => commands::mapping::run_eval(&a),
+        Command::Map(a) => commands::map::run(&a),
+        Command::Eval(a) => commands::eval::run(&a),
         Command::Align(a) | Command::Localize(a) => commands::align::run(&a),
         Command::Voxelize(a) => commands::voxelize::run(&a),
-        Command::Export(a) => commands::map::export(&a),
-        Command::Merge(a) => commands::map::merge(&a),
+        Command::Export(a) => commands::export::run(&a),
+        Command::Merge(a) => commands::merge::run(&a),
         Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Team(a) => commands::team::run(&a),
@@ -105,9 +105,9 @@ fn main() -> ExitCode {
         Command::Beacons(a) => commands::beacons::run(&a),
         Command::Scanner(a) => commands::scanner::run(&a),
         Command::Bench(a) => commands::bench::run(&a),
-        Command::Render(a) => commands::render::run_render(&a),
-        Command::Navgrid(a) => commands::render::run_navgrid(&a),
-        Command::Query(a) => commands::render::run_query(&a),
+        Command::Render(a) => commands::render::run(&a),
+        Command::Navgrid(a) => commands::navgrid::run(&a),
+        Command::Query(a) => commands::query::run(&a),
     };
     match result {
         Ok(code) => code,

@@ -6,26 +6,14 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
-use olmap::align::{self, Dof, Region, RegisterParams, Registration, SearchMode, SearchParams};
+use olmap::align::{self, Region, RegisterParams, Registration, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
 use olmap::io::{self, ReadOptions};
 use olmap::occupancy::{self, MapFormat};
 use serde_json::json;
 
-use crate::args::{parse_numbers, parse_pose, set_threads};
-
-/// Degrees of freedom on the command line.
-#[derive(Clone, Copy, ValueEnum)]
-pub enum DofArg {
-    /// x, y, yaw (z, roll, pitch from the guess).
-    XyYaw,
-    /// x, y, z, yaw (roll, pitch from the guess: gravity-aligned robots).
-    XyzYaw,
-    /// All six; roll and pitch within --max-tilt of the guess.
-    #[value(name = "6dof")]
-    SixDof,
-}
+use crate::args::{parse_numbers, parse_pose, set_threads, DofArgs, ThreadsArgs};
 
 /// `--search`.
 #[derive(Clone, Copy, ValueEnum)]
@@ -49,12 +37,8 @@ pub struct AlignArgs {
     /// Pyramid levels (0: automatic, coarsest at least 16x the finest).
     #[arg(long, default_value_t = 0)]
     pub levels: usize,
-    /// Degrees of freedom searched.
-    #[arg(long, value_enum, default_value = "xyz-yaw")]
-    pub dof: DofArg,
-    /// 6dof: largest roll and pitch searched away from the guess, degrees.
-    #[arg(long, default_value_t = 15.0)]
-    pub max_tilt: f64,
+    #[command(flatten)]
+    pub dof: DofArgs,
     /// A prior pose: `x,y,z,yaw,pitch,roll` (metres, degrees), or a pose file whose first
     /// pose is used. Without --window it only supplies roll/pitch (and z for xy-yaw).
     #[arg(long, value_name = "POSE|FILE", allow_hyphen_values = true)]
@@ -75,9 +59,8 @@ pub struct AlignArgs {
     /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
     #[arg(long = "3dtk-valid")]
     pub threedtk_valid: bool,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub threads: ThreadsArgs,
     /// Print per-level particle counts and timings.
     #[arg(long)]
     pub verbose: bool,
@@ -132,13 +115,7 @@ fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
         }
         None => Region::Global,
     };
-    let dof = match a.dof {
-        DofArg::XyYaw => Dof::XyYaw,
-        DofArg::XyzYaw => Dof::XyzYaw,
-        DofArg::SixDof => Dof::SixDof {
-            max_tilt: a.max_tilt.to_radians(),
-        },
-    };
+    let dof = a.dof.dof();
     Ok(RegisterParams {
         search: SearchParams {
             resolution: a.resolution,
@@ -281,7 +258,7 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
 
 /// Runs `olmap align` (and `localize`, which is the same with a map target).
 pub fn run(a: &AlignArgs) -> anyhow::Result<ExitCode> {
-    set_threads(a.threads)?;
+    set_threads(a.threads.threads)?;
     let p = params(a)?;
     let source = read_cloud(&a.source, a.threedtk_valid)?;
     let r = if MapFormat::from_path(&a.target).is_some() {

@@ -1,16 +1,21 @@
-//! One module per subcommand.
+//! One module per subcommand (`align` serves `align` and `localize`, which share their
+//! arguments).
 
 pub mod align;
 pub mod beacons;
 pub mod bench;
 pub mod convert;
 pub mod demo;
+pub mod eval;
+pub mod export;
 pub mod grid2d;
 pub mod info;
 pub mod map;
-pub mod mapping;
+pub mod merge;
 pub mod mutual;
+pub mod navgrid;
 pub mod poses;
+pub mod query;
 pub mod render;
 pub mod rrd;
 pub mod scanner;

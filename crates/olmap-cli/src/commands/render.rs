@@ -1,14 +1,12 @@
-//! `olmap render`, `olmap navgrid` and `olmap query`: pictures of a map, the navigation
-//! grid a planner needs (thesis §7.3), and point, ray, radius and segment queries.
+//! `olmap render`: pictures of a map (top view, depth image, overlap surface).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
-use clap::{ArgGroup, Args, ValueEnum};
-use nalgebra::{Point3, Vector3};
+use clap::{Args, ValueEnum};
+use nalgebra::Point3;
 use olmap::geometry::{Pose, PoseList};
-use olmap::grid2d::{navigation_grid, write_ros_map, NavGridParams};
 use olmap::occupancy::{self, OccupancyList};
 use olmap::render::{
     overlap_surface, render_depth, render_top_view, write_png, Camera, OverlapSurfaceParams,
@@ -97,7 +95,7 @@ pub struct RenderArgs {
     pub json: bool,
 }
 
-fn parse_band(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
+pub(super) fn parse_band(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
     let [lo, hi] = parse_numbers::<2>(s, what)?;
     if lo > hi {
         bail!("{what}: ZMIN must not be above ZMAX, got {s}");
@@ -120,12 +118,12 @@ fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     Ok((w, h))
 }
 
-fn read(path: &PathBuf) -> anyhow::Result<OccupancyList> {
+pub(super) fn read(path: &PathBuf) -> anyhow::Result<OccupancyList> {
     Ok(occupancy::read_map(path)?.map)
 }
 
 /// Runs `olmap render`.
-pub fn run_render(a: &RenderArgs) -> anyhow::Result<ExitCode> {
+pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
     let map = read(&a.map)?;
     let summary = match a.view {
         ViewArg::Top => {
@@ -244,214 +242,6 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<ExitCode> {
             summary["height"],
             a.output.display()
         );
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// Arguments of `olmap navgrid`.
-#[derive(Args)]
-pub struct NavgridArgs {
-    /// The map (.olm or OctoMap .bt).
-    pub map: PathBuf,
-    /// The scan poses (pose list, e.g. written by `olmap map --poses-out`): rays are traced
-    /// from their positions.
-    #[arg(long, value_name = "FILE")]
-    pub poses: PathBuf,
-    /// The robot-height band, metres: voxels with centres in it are obstacles.
-    #[arg(
-        long,
-        value_name = "ZMIN,ZMAX",
-        default_value = "0.1,1.2",
-        allow_hyphen_values = true
-    )]
-    pub band: String,
-    /// Output PGM image (the ROS map_server YAML is written beside it).
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// Cell size, metres (default: the map's resolution).
-    #[arg(long)]
-    pub resolution: Option<f64>,
-    /// Rays from a scan position reach at most this far, metres.
-    #[arg(long, default_value_t = 30.0)]
-    pub max_range: f64,
-    /// Only voxels with at least this count are obstacles.
-    #[arg(long, default_value_t = 1)]
-    pub min_count: u16,
-    /// Print a JSON summary instead of text.
-    #[arg(long)]
-    pub json: bool,
-}
-
-/// Runs `olmap navgrid`.
-pub fn run_navgrid(a: &NavgridArgs) -> anyhow::Result<ExitCode> {
-    let map = read(&a.map)?;
-    let poses: Vec<Pose> = PoseList::read_path(&a.poses)?
-        .poses
-        .iter()
-        .map(|p| p.pose)
-        .collect();
-    let params = NavGridParams {
-        resolution: a.resolution,
-        band: parse_band(&a.band, "--band")?,
-        max_range: a.max_range,
-        min_count: a.min_count,
-        ..NavGridParams::default()
-    };
-    let grid = navigation_grid(&map, &poses, &params)?;
-    if grid.width == 0 {
-        bail!(
-            "{}: no voxel in the band and no pose: nothing to grid",
-            a.map.display()
-        );
-    }
-    let yaml = write_ros_map(&a.output, &grid)?;
-    let c = grid.counts();
-    if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&json!({
-                "pgm": a.output.display().to_string(), "yaml": yaml.display().to_string(),
-                "width": grid.width, "height": grid.height, "resolution_m": grid.resolution,
-                "origin": grid.origin, "poses": poses.len(),
-                "free": c.free, "occupied": c.occupied, "unknown": c.unknown}))?
-        );
-    } else {
-        println!(
-            "{} x {} cells at {} m from {} poses: {} free, {} occupied, {} unknown -> {} + {}",
-            grid.width,
-            grid.height,
-            grid.resolution,
-            poses.len(),
-            c.free,
-            c.occupied,
-            c.unknown,
-            a.output.display(),
-            yaml.display()
-        );
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// Arguments of `olmap query`.
-#[derive(Args)]
-#[command(group(ArgGroup::new("what").required(true).args(["at", "ray", "radius", "segment"])))]
-pub struct QueryArgs {
-    /// The map (.olm or OctoMap .bt).
-    pub map: PathBuf,
-    /// Is the voxel holding this point occupied? X,Y,Z (m).
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    pub at: Option<String>,
-    /// The first occupied voxel along a ray from X,Y,Z in direction DX,DY,DZ, and its
-    /// distance.
-    #[arg(long, value_name = "X,Y,Z,DX,DY,DZ", allow_hyphen_values = true)]
-    pub ray: Option<String>,
-    /// The occupied voxels whose centres lie within R metres of X,Y,Z.
-    #[arg(long, value_name = "X,Y,Z,R", allow_hyphen_values = true)]
-    pub radius: Option<String>,
-    /// Is the segment between two points free of occupied voxels?
-    #[arg(long, value_name = "X1,Y1,Z1,X2,Y2,Z2", allow_hyphen_values = true)]
-    pub segment: Option<String>,
-    /// Rays reach at most this far, metres.
-    #[arg(long, default_value_t = 30.0)]
-    pub max_range: f64,
-    /// Only voxels with at least this count count as occupied.
-    #[arg(long, default_value_t = 1)]
-    pub min_count: u16,
-    /// Print JSON instead of text.
-    #[arg(long)]
-    pub json: bool,
-}
-
-/// Runs `olmap query`.
-pub fn run_query(a: &QueryArgs) -> anyhow::Result<ExitCode> {
-    let map = read(&a.map)?;
-    let r = map.resolution();
-    let key_json = |k: olmap::geometry::VoxelKey| {
-        let c = map.center(k);
-        json!({"key": [k.x, k.y, k.z], "center": [c.x, c.y, c.z], "count": map.count(k)})
-    };
-    let (value, text) = if let Some(s) = &a.at {
-        let [x, y, z] = parse_numbers::<3>(s, "--at")?;
-        let p = Point3::new(x, y, z);
-        let count = map.count_at(&p);
-        let occupied = count >= a.min_count.max(1);
-        (
-            json!({"query": "at", "point": [x, y, z], "occupied": occupied, "count": count}),
-            format!(
-                "({x}, {y}, {z}): {} (count {count})",
-                if occupied {
-                    "occupied"
-                } else {
-                    "free or unknown"
-                }
-            ),
-        )
-    } else if let Some(s) = &a.ray {
-        let [x, y, z, dx, dy, dz] = parse_numbers::<6>(s, "--ray")?;
-        let hit = map.cast_ray(
-            &Point3::new(x, y, z),
-            &Vector3::new(dx, dy, dz),
-            a.max_range,
-            a.min_count,
-        )?;
-        match hit {
-            Some(h) => (
-                json!({"query": "ray", "hit": true, "distance_m": h.distance,
-                       "point": [h.point.x, h.point.y, h.point.z], "voxel": key_json(h.key)}),
-                format!(
-                    "hit at {:.3} m: voxel {:?} centred at {:?} (count {}), accurate to one voxel ({r} m)",
-                    h.distance, [h.key.x, h.key.y, h.key.z], map.center(h.key).coords.as_slice(), h.count
-                ),
-            ),
-            None => (
-                json!({"query": "ray", "hit": false, "max_range_m": a.max_range}),
-                format!("no occupied voxel within {} m", a.max_range),
-            ),
-        }
-    } else if let Some(s) = &a.radius {
-        let [x, y, z, rad] = parse_numbers::<4>(s, "--radius")?;
-        let near: Vec<_> = map
-            .occupied_within(&Point3::new(x, y, z), rad)?
-            .into_iter()
-            .filter(|(_, c)| *c >= a.min_count.max(1))
-            .collect();
-        let mut text = format!(
-            "{} occupied voxels within {rad} m of ({x}, {y}, {z})",
-            near.len()
-        );
-        for (k, c) in near.iter().take(20) {
-            let p = map.center(*k);
-            text.push_str(&format!(
-                "\n  ({:.3}, {:.3}, {:.3}) count {c}",
-                p.x, p.y, p.z
-            ));
-        }
-        if near.len() > 20 {
-            text.push_str("\n  ...");
-        }
-        (
-            json!({"query": "radius", "center": [x, y, z], "radius_m": rad, "count": near.len(),
-                   "voxels": near.iter().map(|(k, _)| key_json(*k)).collect::<Vec<_>>()}),
-            text,
-        )
-    } else if let Some(s) = &a.segment {
-        let [x1, y1, z1, x2, y2, z2] = parse_numbers::<6>(s, "--segment")?;
-        let free = map.segment_is_free(
-            &Point3::new(x1, y1, z1),
-            &Point3::new(x2, y2, z2),
-            a.min_count,
-        )?;
-        (
-            json!({"query": "segment", "from": [x1, y1, z1], "to": [x2, y2, z2], "free": free}),
-            format!("segment {}", if free { "free" } else { "blocked" }),
-        )
-    } else {
-        bail!("give one of --at, --ray, --radius, --segment");
-    };
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&value)?);
-    } else {
-        println!("{text}");
     }
     Ok(ExitCode::SUCCESS)
 }

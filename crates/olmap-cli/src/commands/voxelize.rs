@@ -10,7 +10,7 @@ use olmap::geometry::{Pose, PoseList};
 use olmap::io::{self, ReadOptions};
 use olmap::occupancy::{self, InsertStats, OccupancyList, PositionBuckets, SensorModel, MAX_COUNT};
 
-use crate::args::{parse_pose, progress, set_threads};
+use crate::args::{parse_pose, progress, set_threads, ThreadsArgs};
 
 /// Arguments of `olmap voxelize`.
 ///
@@ -59,9 +59,8 @@ pub struct VoxelizeArgs {
     /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
     #[arg(long = "3dtk-valid")]
     pub threedtk_valid: bool,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub threads: ThreadsArgs,
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
@@ -114,7 +113,7 @@ fn poses_for(a: &VoxelizeArgs) -> anyhow::Result<Vec<Pose>> {
 
 /// Runs the command.
 pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
-    set_threads(a.threads)?;
+    set_threads(a.threads.threads)?;
     let start = Instant::now();
     if occupancy::MapFormat::from_path(&a.output).is_none() {
         bail!(
