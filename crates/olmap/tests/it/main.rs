@@ -11,6 +11,7 @@ mod layers;
 mod mapping;
 mod mutual;
 mod occupancy;
+mod pipelines;
 mod real_data;
 #[cfg(feature = "render")]
 mod render;
