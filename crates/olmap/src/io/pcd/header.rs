@@ -1,11 +1,12 @@
 //! The PCD header: its `KEY values...` lines up to `DATA`, parsed and checked against each
 //! other into a [`Header`].
 
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 use std::str::FromStr;
 
 use super::{shown, Scalar};
 use crate::error::ParseError;
+use crate::file::header::HeaderLines;
 
 /// Longest header line accepted (a guard against binary garbage without line ends).
 const MAX_HEADER_LINE: u64 = 1 << 20;
@@ -124,43 +125,28 @@ struct RawHeader {
 /// Reads header lines up to and including `DATA`, leaving the reader at the first data byte.
 pub(super) fn read_header<R: BufRead>(reader: &mut R) -> Result<Header, ParseError> {
     let mut raw = RawHeader::default();
-    let mut buf = Vec::with_capacity(256);
-    let mut line_no = 0usize;
-    let mut offset = 0u64;
+    let mut lines = HeaderLines::new(reader, MAX_HEADER_LINE, "not a PCD header");
     loop {
-        buf.clear();
-        let n = reader
-            .by_ref()
-            .take(MAX_HEADER_LINE)
-            .read_until(b'\n', &mut buf)?;
-        if n == 0 {
-            return Err(if line_no == 0 {
+        let Some(line) = lines.next_line()? else {
+            let read = lines.lines();
+            return Err(if read == 0 {
                 ParseError::Empty
             } else {
                 ParseError::Truncated(format!(
-                    "the header ends after {line_no} lines without a DATA line"
+                    "the header ends after {read} lines without a DATA line"
                 ))
             });
-        }
-        line_no += 1;
-        offset += n as u64;
-        if n as u64 == MAX_HEADER_LINE && !buf.ends_with(b"\n") {
-            return Err(ParseError::line(
-                line_no,
-                "header line longer than 1 MiB: not a PCD header",
-            ));
-        }
-        let line = std::str::from_utf8(&buf).map_err(|_| {
-            ParseError::line(line_no, "header line is not text (invalid UTF-8 bytes)")
-        })?;
-        let mut tokens = line.split_ascii_whitespace();
-        let Some(key) = tokens.next() else { continue };
-        if key.starts_with('#') {
+        };
+        let line_no = line.number;
+        let text = line.text("header line is not text (invalid UTF-8 bytes)")?;
+        if line.is_comment() {
             continue;
         }
+        let mut tokens = text.split_ascii_whitespace();
+        let Some(key) = tokens.next() else { continue };
         let values: Vec<&str> = tokens.collect();
         if let Some(encoding) = raw.add(line_no, key, &values)? {
-            return raw.finish(line_no, offset, encoding);
+            return raw.finish(line_no, line.end, encoding);
         }
     }
 }

@@ -1,12 +1,12 @@
 //! The PLY header: the `ply` magic, `format`, `element` and `property` lines up to
 //! `end_header`, and the types they declare.
 
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 
 use nalgebra::Point3;
 
-use super::clip;
 use crate::error::ParseError;
+use crate::file::header::{clip, HeaderLine, HeaderLines};
 
 /// Longest header line accepted (a longer one means this is not a PLY header).
 const MAX_HEADER_LINE: u64 = 64 * 1024;
@@ -169,37 +169,9 @@ pub(super) struct Header {
 // Header parsing
 // ---------------------------------------------------------------------------------------
 
-/// Reads one header line (at most [`MAX_HEADER_LINE`] bytes) into `buf`; returns its
-/// length in bytes, 0 at the end of the stream.
-fn read_header_line<R: BufRead>(
-    r: &mut R,
-    buf: &mut Vec<u8>,
-    line_no: usize,
-) -> Result<u64, ParseError> {
-    buf.clear();
-    let n = (&mut *r).take(MAX_HEADER_LINE).read_until(b'\n', buf)?;
-    if n as u64 == MAX_HEADER_LINE && buf.last() != Some(&b'\n') {
-        return Err(ParseError::line(
-            line_no,
-            format!(
-                "header line longer than {} KiB: expected a PLY header line",
-                MAX_HEADER_LINE / 1024
-            ),
-        ));
-    }
-    Ok(n as u64)
-}
-
-/// Splits bytes at ASCII whitespace, skipping empty pieces.
-#[inline]
-fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
-    line.split(u8::is_ascii_whitespace)
-        .filter(|t| !t.is_empty())
-}
-
 /// Whether a header line is a `comment` or `obj_info` line (free text, maybe not UTF-8).
-fn is_free_text(line: &[u8]) -> bool {
-    matches!(tokens(line).next(), Some(b"comment") | Some(b"obj_info"))
+fn is_free_text(line: HeaderLine<'_>) -> bool {
+    matches!(line.words().next(), Some(b"comment") | Some(b"obj_info"))
 }
 
 /// The origin from `comment olmap origin <x> <y> <z>`, if this is such a line.
@@ -311,39 +283,34 @@ fn parse_format(args: &[&str], line_no: usize) -> Result<Encoding, ParseError> {
 
 /// Reads the header, leaving `r` at the first data byte.
 pub(super) fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
-    let mut buf = Vec::with_capacity(128);
-    let mut bytes = read_header_line(r, &mut buf, 1)?;
-    if bytes == 0 {
+    let mut lines = HeaderLines::new(r, MAX_HEADER_LINE, "expected a PLY header line");
+    let Some(first) = lines.next_line()? else {
         return Err(ParseError::Empty);
-    }
-    if buf.trim_ascii() != b"ply" {
+    };
+    if first.bytes.trim_ascii() != b"ply" {
         return Err(ParseError::line(
             1,
             "expected 'ply' (the PLY magic) as the first line",
         ));
     }
-    let mut line_no = 1;
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut origin = Point3::origin();
     loop {
-        line_no += 1;
-        let n = read_header_line(r, &mut buf, line_no)?;
-        bytes += n;
-        if n == 0 {
+        let Some(line) = lines.next_line()? else {
             return Err(ParseError::Truncated(format!(
                 "the header ends after line {} without 'end_header'",
-                line_no - 1
+                lines.lines()
             )));
-        }
-        if is_free_text(&buf) {
-            if let Some(o) = std::str::from_utf8(&buf).ok().and_then(olmap_origin) {
+        };
+        let line_no = line.number;
+        if is_free_text(line) {
+            if let Some(o) = std::str::from_utf8(line.bytes).ok().and_then(olmap_origin) {
                 origin = o;
             }
             continue;
         }
-        let text = std::str::from_utf8(&buf)
-            .map_err(|_| ParseError::line(line_no, "header line is not text (invalid UTF-8)"))?;
+        let text = line.text("header line is not text (invalid UTF-8)")?;
         let words: Vec<&str> = text.split_ascii_whitespace().collect();
         let Some((&keyword, args)) = words.split_first() else {
             continue; // blank line
@@ -376,7 +343,7 @@ pub(super) fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> 
                     elements,
                     origin,
                     end_line: line_no,
-                    data_start: bytes,
+                    data_start: line.end,
                 });
             }
             other => {

@@ -75,16 +75,6 @@ mod write;
 pub use read::read;
 pub use write::write;
 
-/// A short printable form of some bytes for error messages.
-fn clip(bytes: &[u8]) -> String {
-    let s = String::from_utf8_lossy(&bytes[..bytes.len().min(40)]).into_owned();
-    if bytes.len() > 40 {
-        s + "..."
-    } else {
-        s
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

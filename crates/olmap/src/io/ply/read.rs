@@ -3,10 +3,10 @@
 use std::io::BufRead;
 
 use super::binary::read_binary;
-use super::clip;
 use super::header::{parse_header, Element, Encoding, Header, Kind, Scalar};
 use super::vertex::{Builder, Plan, SLOTS};
 use crate::error::ParseError;
+use crate::file::header::clip;
 use crate::io::{CloudFormat, LoadedCloud, ReadReport};
 
 /// Reads a PLY point cloud (the `vertex` element) from a stream.
