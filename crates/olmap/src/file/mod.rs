@@ -7,6 +7,7 @@
 mod atomic;
 pub mod crc32;
 pub(crate) mod cursor;
+pub(crate) mod header;
 pub mod lzf;
 mod read;
 pub(crate) mod text;

@@ -40,10 +40,11 @@
 //! children are all occupied becomes one occupied leaf, recursively. Writing keeps no free
 //! space: a `.bt` file written by olmap marks everything not occupied as unknown.
 
-use std::io::{BufRead, Read, Write};
+use std::io::{BufRead, Write};
 use std::path::Path;
 
 use crate::error::{Location, ParseError};
+use crate::file::header::{clip, HeaderLines};
 use crate::geometry::VoxelKey;
 
 /// The depth of every OctoMap tree: its leaves at this depth are single voxels.
@@ -217,44 +218,6 @@ fn parse<R: BufRead>(mut reader: R) -> Result<(Header, BtStats, Vec<Leaf>), Pars
     Ok((header, stats, leaves))
 }
 
-/// Reads one header line (at most [`MAX_HEADER_LINE`] bytes) into `buf`, returning the bytes
-/// consumed (0 at the end of the stream).
-fn read_header_line<R: BufRead>(
-    r: &mut R,
-    buf: &mut Vec<u8>,
-    line_no: usize,
-) -> Result<u64, ParseError> {
-    buf.clear();
-    let n = (&mut *r).take(MAX_HEADER_LINE).read_until(b'\n', buf)? as u64;
-    if n == MAX_HEADER_LINE && buf.last() != Some(&b'\n') {
-        return Err(ParseError::line(
-            line_no,
-            format!(
-                "header line longer than {} KiB: expected a '#' comment or one of the keywords \
-                 id, size, res, data",
-                MAX_HEADER_LINE / 1024
-            ),
-        ));
-    }
-    Ok(n)
-}
-
-/// A line without its `\n` or `\r\n` end.
-fn trim_line_end(line: &[u8]) -> &[u8] {
-    let line = line.strip_suffix(b"\n").unwrap_or(line);
-    line.strip_suffix(b"\r").unwrap_or(line)
-}
-
-/// A short printable form of some bytes for error messages.
-fn clip(bytes: &[u8]) -> String {
-    let s = String::from_utf8_lossy(&bytes[..bytes.len().min(40)]).into_owned();
-    if bytes.len() > 40 {
-        s + "..."
-    } else {
-        s
-    }
-}
-
 /// The single value of a keyword line, or an error naming the keyword and what it expects.
 fn single_value<'a>(
     keyword: &str,
@@ -280,12 +243,40 @@ fn single_value<'a>(
 
 /// Parses the text header up to and including the `data` line.
 fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
-    let mut buf = Vec::with_capacity(128);
-    let mut offset = read_header_line(r, &mut buf, 1)?;
-    if offset == 0 {
+    let mut lines = HeaderLines::new(
+        r,
+        MAX_HEADER_LINE,
+        "expected a '#' comment or one of the keywords id, size, res, data",
+    );
+    let Some(first) = lines.next_line()? else {
         return Err(ParseError::Empty);
+    };
+    check_first_line(first.bytes)?;
+    let mut keywords = Keywords::default();
+    loop {
+        let Some(line) = lines.next_line()? else {
+            return Err(ParseError::Truncated(format!(
+                "the header ends after line {} without a 'data' line",
+                lines.lines()
+            )));
+        };
+        let line_no = line.number;
+        if line.is_comment() {
+            continue;
+        }
+        let words: Vec<&[u8]> = line.words().collect();
+        let Some((&keyword, args)) = words.split_first() else {
+            continue; // blank line
+        };
+        if keyword == b"data" {
+            return keywords.finish(args, line_no, line.end);
+        }
+        keywords.take(keyword, args, line_no)?;
     }
-    let first = trim_line_end(&buf);
+}
+
+/// Checks the first line of the header: the `.bt` magic (a `.ot` file gets its own error).
+fn check_first_line(first: &[u8]) -> Result<(), ParseError> {
     if !first.starts_with(MAGIC) {
         if first.starts_with(OT_MAGIC) {
             return Err(ParseError::Unsupported(
@@ -303,31 +294,21 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
             ),
         ));
     }
-    let mut id_seen = false;
-    let mut size: Option<u64> = None;
-    let mut resolution: Option<f64> = None;
-    let mut line_no = 1;
-    loop {
-        line_no += 1;
-        let n = read_header_line(r, &mut buf, line_no)?;
-        if n == 0 {
-            return Err(ParseError::Truncated(format!(
-                "the header ends after line {} without a 'data' line",
-                line_no - 1
-            )));
-        }
-        offset += n;
-        let line = trim_line_end(&buf);
-        if line.trim_ascii_start().starts_with(b"#") {
-            continue; // comment
-        }
-        let words: Vec<&[u8]> = line
-            .split(u8::is_ascii_whitespace)
-            .filter(|w| !w.is_empty())
-            .collect();
-        let Some((&keyword, args)) = words.split_first() else {
-            continue; // blank line
-        };
+    Ok(())
+}
+
+/// The keyword lines of the header seen so far.
+#[derive(Debug, Default)]
+struct Keywords {
+    id_seen: bool,
+    size: Option<u64>,
+    resolution: Option<f64>,
+}
+
+impl Keywords {
+    /// Takes an `id`, `size` or `res` line (`keyword` and the words after it); any other
+    /// keyword is an error (the caller handles `data`).
+    fn take(&mut self, keyword: &[u8], args: &[&[u8]], line_no: usize) -> Result<(), ParseError> {
         let repeated = |name: &str| {
             ParseError::line(
                 line_no,
@@ -336,7 +317,7 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
         };
         match keyword {
             b"id" => {
-                if id_seen {
+                if self.id_seen {
                     return Err(repeated("id"));
                 }
                 let v = single_value("id", args, line_no, "the tree type 'OcTree'")?;
@@ -349,10 +330,10 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
                         ),
                     ));
                 }
-                id_seen = true;
+                self.id_seen = true;
             }
             b"size" => {
-                if size.is_some() {
+                if self.size.is_some() {
                     return Err(repeated("size"));
                 }
                 let expected = "the node count (a non-negative integer)";
@@ -360,12 +341,12 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
                 let parsed = std::str::from_utf8(v)
                     .ok()
                     .and_then(|s| s.parse::<u64>().ok());
-                size = Some(parsed.ok_or_else(|| {
+                self.size = Some(parsed.ok_or_else(|| {
                     ParseError::line(line_no, format!("'size {}': expected {expected}", clip(v)))
                 })?);
             }
             b"res" => {
-                if resolution.is_some() {
+                if self.resolution.is_some() {
                     return Err(repeated("res"));
                 }
                 let expected = "the resolution in metres (a positive finite number)";
@@ -374,39 +355,9 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
                     .ok()
                     .and_then(|s| s.parse::<f64>().ok())
                     .filter(|r| r.is_finite() && *r > 0.0);
-                resolution = Some(parsed.ok_or_else(|| {
+                self.resolution = Some(parsed.ok_or_else(|| {
                     ParseError::line(line_no, format!("'res {}': expected {expected}", clip(v)))
                 })?);
-            }
-            b"data" => {
-                if !args.is_empty() {
-                    return Err(ParseError::line(
-                        line_no,
-                        "'data' followed by more text: expected 'data' alone on its line",
-                    ));
-                }
-                let missing: Vec<&str> = [
-                    (!id_seen).then_some("id"),
-                    size.is_none().then_some("size"),
-                    resolution.is_none().then_some("res"),
-                ]
-                .into_iter()
-                .flatten()
-                .collect();
-                return match (size, resolution) {
-                    (Some(size), Some(resolution)) if id_seen => Ok(Header {
-                        size,
-                        resolution,
-                        data_start: offset,
-                    }),
-                    _ => Err(ParseError::line(
-                        line_no,
-                        format!(
-                            "'data' before the {} line(s): expected id, size and res before data",
-                            missing.join(", ")
-                        ),
-                    )),
-                };
             }
             other => {
                 return Err(ParseError::line(
@@ -418,6 +369,40 @@ fn parse_header<R: BufRead>(r: &mut R) -> Result<Header, ParseError> {
                     ),
                 ));
             }
+        }
+        Ok(())
+    }
+
+    /// The header at the `data` line (`args`: the words after `data`, at `line_no`), the
+    /// body starting at byte `data_start`.
+    fn finish(self, args: &[&[u8]], line_no: usize, data_start: u64) -> Result<Header, ParseError> {
+        if !args.is_empty() {
+            return Err(ParseError::line(
+                line_no,
+                "'data' followed by more text: expected 'data' alone on its line",
+            ));
+        }
+        let missing: Vec<&str> = [
+            (!self.id_seen).then_some("id"),
+            self.size.is_none().then_some("size"),
+            self.resolution.is_none().then_some("res"),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        match (self.size, self.resolution) {
+            (Some(size), Some(resolution)) if self.id_seen => Ok(Header {
+                size,
+                resolution,
+                data_start,
+            }),
+            _ => Err(ParseError::line(
+                line_no,
+                format!(
+                    "'data' before the {} line(s): expected id, size and res before data",
+                    missing.join(", ")
+                ),
+            )),
         }
     }
 }
