@@ -1,7 +1,7 @@
 //! LZF compression in pure Rust, in the stream format of Marc Lehmann's liblzf.
 //!
 //! PCL stores `DATA binary_compressed` PCD files as one LZF block (its `lzf.cpp` is a copy of
-//! liblzf), so this module exists for [`super::pcd`]. An LZF stream is a sequence of
+//! liblzf), so this module exists for [`crate::io::pcd`]. An LZF stream is a sequence of
 //! instructions, each starting with a control byte `c`:
 //!
 //! * `c < 32`: a literal run; the next `c + 1` bytes are copied to the output.
