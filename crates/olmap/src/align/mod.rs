@@ -4,7 +4,11 @@
 mod bnb;
 mod cells;
 mod dense;
+mod evaluate;
+mod exhaustive;
 pub mod icp;
+mod lattice;
+mod multires;
 mod params;
 mod register;
 mod rows;
@@ -13,12 +17,14 @@ mod significance;
 mod target;
 
 pub use bnb::EXACT_MAX_AMBIGUITY;
+pub use exhaustive::exhaustive_search;
+pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds, REFINE_REACH_CELLS,
 };
-pub use search::{exhaustive_search, global_search, Alignment, Candidate, LevelReport};
+pub use search::{global_search, search};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};
 

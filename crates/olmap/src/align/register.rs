@@ -3,7 +3,8 @@
 use std::time::Instant;
 
 use super::icp::{refine, IcpParams, IcpResult};
-use super::search::{global_search, Alignment};
+use super::lattice::Alignment;
+use super::search::global_search;
 use super::target::SearchTarget;
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;

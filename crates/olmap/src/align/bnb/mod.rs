@@ -48,11 +48,11 @@ use rayon::prelude::*;
 
 use self::grid::{BitGrid, PairGrid};
 use super::dense::DenseGrid;
-use super::params::SearchParams;
-use super::search::{
+use super::lattice::{
     finish, no_overlap, prepare, region_counts, threshold, Alignment, Cand, Lattice, LevelReport,
     Scored,
 };
+use super::params::SearchParams;
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
