@@ -11,11 +11,11 @@
 
 use rayon::prelude::*;
 
-use super::cells::CellGrid;
-use super::dense::DenseGrid;
 use super::lattice::{key_of, rank, region_counts, threshold, Cand, Lattice, Problem, Scored};
 use super::params::{Dof, Locus, Region, SearchParams};
-use super::rows::RowGrid;
+use super::score::CellGrid;
+use super::score::DenseGrid;
+use super::score::RowGrid;
 use crate::geometry::VoxelKey;
 use crate::occupancy::{OccupancyList, Pyramid};
 

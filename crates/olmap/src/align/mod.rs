@@ -2,8 +2,6 @@
 //! refinement.
 
 mod bnb;
-mod cells;
-mod dense;
 mod evaluate;
 mod exhaustive;
 pub mod icp;
@@ -11,7 +9,7 @@ mod lattice;
 mod multires;
 mod params;
 mod register;
-mod rows;
+mod score;
 mod search;
 mod significance;
 mod target;

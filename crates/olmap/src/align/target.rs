@@ -1,6 +1,6 @@
 //! What a search aligns against: a map pyramid, and the free space seen by its scans.
 
-use super::dense::DenseGrid;
+use super::score::DenseGrid;
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::Pose;

@@ -47,12 +47,12 @@ use nalgebra::{Point3, Rotation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use self::grid::{BitGrid, PairGrid};
-use super::dense::DenseGrid;
 use super::lattice::{
     finish, no_overlap, prepare, region_counts, threshold, Alignment, Cand, Lattice, LevelReport,
     Scored,
 };
 use super::params::SearchParams;
+use super::score::DenseGrid;
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};

@@ -6,10 +6,10 @@ use std::sync::OnceLock;
 use nalgebra::{Point3, Vector3};
 
 use super::Lattice;
-use crate::align::cells::CellGrid;
-use crate::align::dense::DenseGrid;
 use crate::align::params::{Dof, Region, SearchParams};
-use crate::align::rows::RowGrid;
+use crate::align::score::CellGrid;
+use crate::align::score::DenseGrid;
+use crate::align::score::RowGrid;
 use crate::align::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
