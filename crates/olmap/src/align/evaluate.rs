@@ -67,12 +67,10 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
             };
             ts.iter()
                 .zip(counts)
-                .map(|(t, (hits, conflicts))| {
-                    (
-                        2 * hits as i64 - conflicts as i64,
-                        hits,
-                        Cand { r: *r, t: *t },
-                    )
+                .map(|(t, (hits, conflicts))| Scored {
+                    score: 2 * hits as i64 - conflicts as i64,
+                    hits,
+                    cand: Cand { r: *r, t: *t },
                 })
                 .collect()
         })
@@ -142,13 +140,13 @@ pub(super) fn score_level(
 ) -> (Vec<Scored>, u32, usize) {
     let mut scored = evaluate(problem, cands, level);
     let evaluated = scored.len();
-    let best = scored.iter().map(|s| s.0).max().unwrap_or(0);
+    let best = scored.iter().map(|s| s.score).max().unwrap_or(0);
     let cut = threshold(best, keep_ratio);
     // Only the poses that pass are ranked: at the coarsest level they are a few hundred
     // of a few hundred thousand.
-    scored.retain(|s| s.0 >= cut);
+    scored.retain(|s| s.score >= cut);
     rank(&mut scored);
-    let best_hits = scored.first().map_or(0, |s| s.1);
+    let best_hits = scored.first().map_or(0, |s| s.hits);
     (scored, best_hits, evaluated)
 }
 

@@ -14,6 +14,11 @@ use crate::error::Result;
 /// The level a locus search starts at (cells 4x the finest).
 const LOCUS_START_LEVEL: usize = 2;
 
+/// Children per survivor to reserve room for: the resampling (Algorithm 6) of the three
+/// axes of a four-degree-of-freedom search (x, y, yaw; z adds a factor 3, six degrees of
+/// freedom a factor 27). Only a capacity hint: the vector grows when more come.
+const CHILDREN_PER_SURVIVOR: usize = 27;
+
 /// The share of the best score a locus search keeps at its coarse levels (at most
 /// [`SearchParams::keep_ratio`]; the finest level and the ambiguity test use that). A
 /// locus has one free parameter, so keeping more poses is cheap, and 80 % lost the true
@@ -63,9 +68,9 @@ pub(super) fn multires_search(
         reports.push(level_report(
             &problem, level, evaluated, passed, survivors, best_hits, t,
         ));
-        let mut next = Vec::with_capacity(survivors * 27);
-        for (_, _, c) in &scored[..survivors] {
-            problem.lattice.children(c, &mut next);
+        let mut next = Vec::with_capacity(survivors * CHILDREN_PER_SURVIVOR);
+        for s in &scored[..survivors] {
+            problem.lattice.children(&s.cand, &mut next);
         }
         next.sort_unstable();
         next.dedup();

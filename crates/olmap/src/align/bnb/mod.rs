@@ -147,8 +147,35 @@ fn fine_grids(
     Some((g, f))
 }
 
-/// A child kept for expansion: bound, rotation block, translation block, values slot.
-type Kid = (i64, [i32; 3], [i32; 3], usize);
+/// A node found worth expanding: its bound, rotation block and translation block.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    /// The node's score bound.
+    bound: i64,
+    /// Rotation block indices.
+    rot: [i32; 3],
+    /// Translation block indices.
+    trans: [i32; 3],
+}
+
+impl Block {
+    /// Best bound first; ties by (rotation block, translation block), lexicographically.
+    fn best_first(&self, other: &Block) -> std::cmp::Ordering {
+        other
+            .bound
+            .cmp(&self.bound)
+            .then((self.rot, self.trans).cmp(&(other.rot, other.trans)))
+    }
+}
+
+/// A child kept for expansion: the block and the slot of its per-voxel values.
+#[derive(Debug, Clone, Copy)]
+struct Kid {
+    /// Bound and blocks.
+    block: Block,
+    /// Where its per-voxel values are in the level's buffer.
+    slot: usize,
+}
 
 /// Per-thread scratch, counts and the best pose found.
 struct Worker {
@@ -202,6 +229,10 @@ impl Child {
         }
     }
 }
+
+/// A score below every real one (a pass's floor and best before anything is found), with
+/// room left below it so that sums cannot overflow.
+const NO_SCORE: i64 = i64::MIN / 4;
 
 /// Voxels summed between two tests of the cut.
 const CHUNK: usize = 32;
@@ -433,12 +464,12 @@ impl Pass<'_> {
     fn record(&self, w: &mut Worker, f: Scored) {
         let better = match w.best {
             None => true,
-            Some(b) => f.0 > b.0 || (f.0 == b.0 && f.2 < b.2),
+            Some(b) => f.score > b.score || (f.score == b.score && f.cand < b.cand),
         };
         if better {
             w.best = Some(f);
         }
-        self.best.fetch_max(f.0, Ordering::Relaxed);
+        self.best.fetch_max(f.score, Ordering::Relaxed);
     }
 
     /// Depth first below a node that passed, whose per-voxel values are `vals`.
@@ -508,17 +539,40 @@ impl Pass<'_> {
                     let cand = Cand { r: rk, t: c.t };
                     if !self.pose_excluded(&cand) {
                         w.passed[0] += 1;
-                        self.record(w, (c.sum, c.hits, cand));
+                        self.record(
+                            w,
+                            Scored {
+                                score: c.sum,
+                                hits: c.hits,
+                                cand,
+                            },
+                        );
                     }
                 } else {
-                    kids.push((c.sum, rk, c.t, c.slot));
+                    kids.push(Kid {
+                        block: Block {
+                            bound: c.sum,
+                            rot: rk,
+                            trans: c.t,
+                        },
+                        slot: c.slot,
+                    });
                 }
             }
             w.level_keys[cl as usize] = keys;
         }
         w.live = live;
-        kids.sort_unstable_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
-        for &(bound, rk, tk, slot) in &kids {
+        kids.sort_unstable_by(|a, b| a.block.best_first(&b.block));
+        for &Kid {
+            block:
+                Block {
+                    bound,
+                    rot: rk,
+                    trans: tk,
+                },
+            slot,
+        } in &kids
+        {
             if bound < self.cut() {
                 break;
             }
@@ -581,7 +635,7 @@ impl Pass<'_> {
             w.live = live;
             bound
         };
-        let mut roots: Vec<(i64, [i32; 3], [i32; 3])> = rot_roots
+        let mut roots: Vec<Block> = rot_roots
             .par_iter()
             .map_init(new_worker, |w, rb| {
                 b.fill_keys(*rb, top, &mut w.keys);
@@ -592,7 +646,11 @@ impl Pass<'_> {
                     .filter(|tb| !self.node_excluded(*rb, **tb, top))
                     .filter_map(|tb| {
                         let (s, _) = bound_root(w, *tb, &mut buf, self.floor)?;
-                        (s >= self.floor).then_some((s, *rb, *tb))
+                        (s >= self.floor).then_some(Block {
+                            bound: s,
+                            rot: *rb,
+                            trans: *tb,
+                        })
                     })
                     .collect::<Vec<_>>();
                 w.root_vals = buf;
@@ -600,7 +658,7 @@ impl Pass<'_> {
             })
             .flatten()
             .collect();
-        roots.sort_unstable_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        roots.sort_unstable_by(Block::best_first);
         let n_roots = rot_roots.len() * t_roots.len();
         let next = AtomicUsize::new(0);
         let threads = rayon::current_num_threads().max(1);
@@ -610,7 +668,12 @@ impl Pass<'_> {
                 let mut w = new_worker();
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&(bound, rb, tb)) = roots.get(i) else {
+                    let Some(&Block {
+                        bound,
+                        rot: rb,
+                        trans: tb,
+                    }) = roots.get(i)
+                    else {
                         break;
                     };
                     if bound < self.cut() {
@@ -625,7 +688,14 @@ impl Pass<'_> {
                         if top == 0 {
                             let c = Cand { r: rb, t: tb };
                             if !self.pose_excluded(&c) {
-                                self.record(&mut w, (s, h, c));
+                                self.record(
+                                    &mut w,
+                                    Scored {
+                                        score: s,
+                                        hits: h,
+                                        cand: c,
+                                    },
+                                );
                             }
                         } else {
                             self.expand(&mut w, rb, tb, top, &vals);
@@ -822,13 +892,13 @@ pub(super) fn exact_search(
     let mut found: Vec<Scored> = Vec::new();
     let mut bounded = vec![0usize; n_levels];
     let mut passed = vec![0usize; n_levels];
-    let mut floor = i64::MIN / 4;
+    let mut floor = NO_SCORE;
     while found.len() < EXACT_MAX_AMBIGUITY {
         let pass = Pass {
             bnb: &bnb,
             heads: &heads,
             floor,
-            best: AtomicI64::new(i64::MIN / 4),
+            best: AtomicI64::new(NO_SCORE),
         };
         let workers = pass.run(&new_worker);
         for w in &workers {
@@ -838,7 +908,7 @@ pub(super) fn exact_search(
             }
         }
         let best = workers.iter().filter_map(|w| w.best).reduce(|a, b| {
-            if b.0 > a.0 || (b.0 == a.0 && b.2 < a.2) {
+            if b.score > a.score || (b.score == a.score && b.cand < a.cand) {
                 b
             } else {
                 a
@@ -846,13 +916,13 @@ pub(super) fn exact_search(
         });
         let Some(best) = best else { break };
         if found.is_empty() {
-            if best.1 == 0 {
+            if best.hits == 0 {
                 found.push(best);
                 break;
             }
-            floor = threshold(best.0, params.keep_ratio);
+            floor = threshold(best.score, params.keep_ratio);
         }
-        let pose = l.pose(&best.2, 0);
+        let pose = l.pose(&best.cand, 0);
         heads.push(Head {
             t: pose.translation(),
             rot: pose.rotation(),
@@ -870,7 +940,7 @@ pub(super) fn exact_search(
             passed: passed[lv],
             survivors: passed[lv],
             best_overlap: if lv == 0 {
-                found.first().map_or(0, |s| s.1 as u64)
+                found.first().map_or(0, |s| s.hits as u64)
             } else {
                 0
             },
@@ -884,7 +954,7 @@ pub(super) fn exact_search(
         })
         .collect();
     let mut a = match found.first() {
-        Some(s) if s.1 > 0 => finish(&problem, params, &found, reports, start),
+        Some(s) if s.hits > 0 => finish(&problem, params, &found, reports, start),
         _ => no_overlap(&problem, reports, start),
     };
     a.exact = true;

@@ -83,8 +83,19 @@ pub struct Alignment {
     pub exact: bool,
 }
 
-/// A scored pose: ranking score `2 * hits - conflicts`, the hits, the pose.
-pub(crate) type Scored = (i64, u32, Cand);
+/// A scored pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Scored {
+    /// The ranking score `2 * hits - conflicts`.
+    pub(crate) score: i64,
+    /// Scan voxels landing in occupied cells.
+    pub(crate) hits: u32,
+    /// The pose.
+    pub(crate) cand: Cand,
+}
+
+/// The most candidates (cluster heads) an [`Alignment`] lists.
+pub(crate) const MAX_CANDIDATES: usize = 10;
 
 /// The lowest score that survives: `keep_ratio` of the best for a positive best, the same
 /// margin below it otherwise.
@@ -94,7 +105,7 @@ pub(crate) fn threshold(best: i64, keep_ratio: f64) -> i64 {
 
 /// Best first; ties by lattice index (deterministic).
 pub(crate) fn rank(scored: &mut [Scored]) {
-    scored.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.2.cmp(&b.2)));
+    scored.sort_unstable_by(|a, b| b.score.cmp(&a.score).then(a.cand.cmp(&b.cand)));
 }
 
 fn angle_between(a: &Pose, b: &Pose) -> f64 {
@@ -109,12 +120,16 @@ pub(crate) fn finish(
     start: Instant,
 ) -> Alignment {
     let l = &problem.lattice;
-    let (best_score, best_hits, best) = scored[0];
+    let Scored {
+        score: best_score,
+        hits: best_hits,
+        cand: best,
+    } = scored[0];
     let cut = threshold(best_score, params.keep_ratio);
     // Cluster the finest-level poses within keep_ratio of the best.
     let mut heads: Vec<Candidate> = Vec::new();
-    for (_, hits, c) in scored.iter().take_while(|(s, _, _)| *s >= cut) {
-        let pose = l.pose(c, 0);
+    for s in scored.iter().take_while(|s| s.score >= cut) {
+        let pose = l.pose(&s.cand, 0);
         let near = heads.iter().any(|h| {
             (h.pose.translation() - pose.translation()).norm() <= params.ambiguity_distance
                 && angle_between(&h.pose, &pose) <= params.ambiguity_angle
@@ -122,14 +137,14 @@ pub(crate) fn finish(
         if !near {
             heads.push(Candidate {
                 pose,
-                overlap: *hits as u64,
+                overlap: s.hits as u64,
             });
         }
     }
     let n = problem.scan[0].len() as u64;
     let overlap = best_hits as u64;
     let ambiguity = heads.len().max(1);
-    heads.truncate(10);
+    heads.truncate(MAX_CANDIDATES);
     if heads.is_empty() {
         heads.push(Candidate {
             pose: l.pose(&best, 0),
