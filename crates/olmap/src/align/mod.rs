@@ -30,7 +30,7 @@ use crate::cloud::PointCloud;
 use crate::error::Result;
 
 /// Global search of `source` against a `target` cloud: the target is voxelised (endpoints)
-/// at `params.resolution` into a pyramid (levels: [`SearchParams::levels_for`]) with its
+/// at `params.resolution` into a pyramid (levels: [`SearchParams::levels_for_source`]) with its
 /// free space ray traced from its origin, then [`global_search`] runs. Returns
 /// `T_target_source`.
 pub fn align_clouds(
@@ -43,7 +43,8 @@ pub fn align_clouds(
     global_search(source, &target, params)
 }
 
-/// The number of levels for a source and a target cloud.
+/// The number of levels for a source and a target cloud (the target built at
+/// `params.resolution`): [`SearchParams::levels_for_source`].
 pub(crate) fn levels_for_clouds(
     source: &PointCloud,
     target: &PointCloud,
@@ -52,6 +53,5 @@ pub(crate) fn levels_for_clouds(
     let extent = target
         .bounding_box()
         .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
-    let range = source.stats().range.map_or(params.max_range, |r| r.max);
-    params.levels_for(extent, range)
+    params.levels_for_source(params.resolution, extent, source)
 }

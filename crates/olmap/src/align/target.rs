@@ -68,6 +68,12 @@ impl SearchTarget {
         Ok(())
     }
 
+    /// The finest voxel edge, metres: the resolution every search of this target runs at
+    /// (whatever [`super::SearchParams::resolution`] says).
+    pub fn resolution(&self) -> f64 {
+        self.pyramid.base().resolution()
+    }
+
     /// The map pyramid.
     pub fn pyramid(&self) -> &Pyramid {
         &self.pyramid

@@ -94,7 +94,8 @@ pub(crate) fn prepare<'a>(
 ) -> Result<Problem<'a>> {
     check(params)?;
     let pyramid = &target.pyramid;
-    let res = pyramid.base().resolution();
+    // The target alone fixes the finest resolution (`params.resolution` only built it).
+    let res = target.resolution();
     let scan_cloud = source.range_band(0.0, params.max_range);
     if scan_cloud.is_empty() {
         return Err(Error::InvalidArgument(format!(
