@@ -2,23 +2,27 @@
 //! refinement.
 
 mod bnb;
-mod cells;
-mod dense;
+mod evaluate;
+mod exhaustive;
 pub mod icp;
+mod lattice;
+mod multires;
 mod params;
 mod register;
-mod rows;
+mod score;
 mod search;
 mod significance;
 mod target;
 
 pub use bnb::EXACT_MAX_AMBIGUITY;
+pub use exhaustive::exhaustive_search;
+pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds, REFINE_REACH_CELLS,
 };
-pub use search::{exhaustive_search, global_search, Alignment, Candidate, LevelReport};
+pub use search::{global_search, search};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};
 
@@ -26,7 +30,7 @@ use crate::cloud::PointCloud;
 use crate::error::Result;
 
 /// Global search of `source` against a `target` cloud: the target is voxelised (endpoints)
-/// at `params.resolution` into a pyramid (levels: [`SearchParams::levels_for`]) with its
+/// at `params.resolution` into a pyramid (levels: [`SearchParams::levels_for_source`]) with its
 /// free space ray traced from its origin, then [`global_search`] runs. Returns
 /// `T_target_source`.
 pub fn align_clouds(
@@ -39,7 +43,8 @@ pub fn align_clouds(
     global_search(source, &target, params)
 }
 
-/// The number of levels for a source and a target cloud.
+/// The number of levels for a source and a target cloud (the target built at
+/// `params.resolution`): [`SearchParams::levels_for_source`].
 pub(crate) fn levels_for_clouds(
     source: &PointCloud,
     target: &PointCloud,
@@ -48,6 +53,5 @@ pub(crate) fn levels_for_clouds(
     let extent = target
         .bounding_box()
         .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
-    let range = source.stats().range.map_or(params.max_range, |r| r.max);
-    params.levels_for(extent, range)
+    params.levels_for_source(params.resolution, extent, source)
 }

@@ -1,5 +1,6 @@
 //! Parameters of the global search.
 
+use crate::cloud::PointCloud;
 use crate::geometry::Pose;
 
 /// Which pose parameters the search explores.
@@ -155,7 +156,12 @@ impl Locus {
 /// Parameters of [`super::global_search`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchParams {
-    /// Finest voxel edge, metres (default 0.1).
+    /// Finest voxel edge, metres (default 0.1), used to BUILD a target
+    /// ([`super::align_clouds`], [`super::register`]) and by the level rule
+    /// ([`SearchParams::levels_for_source`]). A search takes its finest resolution from its
+    /// [`super::SearchTarget`] only ([`super::SearchTarget::resolution`]); there this field
+    /// is only checked to be a finite number > 0, so a target built at another resolution
+    /// is searched at the target's.
     pub resolution: f64,
     /// Levels of the pyramid; the coarsest cell is `resolution * 2^(levels-1)`. 0 (the
     /// default) chooses: at least 5 levels (coarsest 16x the finest, as in thesis §6.4.2),
@@ -204,21 +210,53 @@ impl SearchParams {
         }
     }
 
+    /// The level rule, the one home of "levels from extent": the number of pyramid levels
+    /// for a target of bounding-box `target_extent` (metres) built at `resolution` (metres)
+    /// and a `source` scan, whose farthest point from its sensor (or `max_range` when it has
+    /// none) is the range of the angular step. `levels` if set, else the automatic rule of
+    /// [`SearchParams::levels`].
+    pub fn levels_for_source(
+        &self,
+        resolution: f64,
+        target_extent: nalgebra::Vector3<f64>,
+        source: &PointCloud,
+    ) -> usize {
+        let range = source.stats().range.map_or(self.max_range, |r| r.max);
+        self.levels_at(resolution, target_extent, range)
+    }
+
     /// The number of levels to use for a target of bounding-box `extent` (metres) and a scan
-    /// reaching `range` metres: `levels` if set, else the automatic rule above.
+    /// reaching `range` metres: `levels` if set, else the automatic rule above (at
+    /// [`SearchParams::resolution`]; see [`SearchParams::levels_for_source`]).
     pub fn levels_for(&self, extent: nalgebra::Vector3<f64>, range: f64) -> usize {
+        self.levels_at(self.resolution, extent, range)
+    }
+
+    /// [`SearchParams::levels_for`] for a target built at `resolution`.
+    fn levels_at(&self, resolution: f64, extent: nalgebra::Vector3<f64>, range: f64) -> usize {
         if self.levels > 0 {
             return self.levels;
         }
-        let range = range.clamp(self.resolution, self.max_range);
+        let range = range.clamp(resolution, self.max_range);
         (5..=10)
-            .find(|&l| self.coarse_poses(extent, range, l) <= self.max_coarse_poses)
+            .find(|&l| self.coarse_poses_at(resolution, extent, range, l) <= self.max_coarse_poses)
             .unwrap_or(10)
     }
 
-    /// Poses of the uniform start at `levels` levels.
+    /// Poses of the uniform start at `levels` levels (at [`SearchParams::resolution`]).
     pub fn coarse_poses(&self, extent: nalgebra::Vector3<f64>, range: f64, levels: usize) -> u64 {
-        let cell = self.resolution * (1u64 << (levels - 1)) as f64;
+        self.coarse_poses_at(self.resolution, extent, range, levels)
+    }
+
+    /// [`SearchParams::coarse_poses`] for a target built at `resolution`.
+    fn coarse_poses_at(
+        &self,
+        resolution: f64,
+        extent: nalgebra::Vector3<f64>,
+        range: f64,
+        levels: usize,
+    ) -> u64 {
+        let cell = resolution * (1u64 << (levels - 1)) as f64;
         let dth = cell / range;
         let count = |e: f64, step: f64| (e / step).ceil().max(0.0) as u64 + 1;
         let (nx, ny, nz, nyaw) = match self.region {

@@ -3,7 +3,8 @@
 use std::time::Instant;
 
 use super::icp::{refine, IcpParams, IcpResult};
-use super::search::{global_search, Alignment};
+use super::lattice::Alignment;
+use super::search::global_search;
 use super::target::SearchTarget;
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
@@ -263,17 +264,15 @@ pub fn localize(
     params: &RegisterParams,
 ) -> Result<Registration> {
     let start = Instant::now();
+    // The search runs at the map's resolution (the target's); the parameters say so too,
+    // so that their check is of the value in use.
     let mut search_params = params.search.clone();
     search_params.resolution = map.resolution();
     let extent = map
         .stats()
         .bbox
         .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
-    let range = source
-        .stats()
-        .range
-        .map_or(search_params.max_range, |r| r.max);
-    let levels = search_params.levels_for(extent, range);
+    let levels = search_params.levels_for_source(map.resolution(), extent, source);
     let target = SearchTarget::from_map(map.clone(), levels)?;
     let search = global_search(source, &target, &search_params)?;
     finish(

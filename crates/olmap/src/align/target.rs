@@ -1,6 +1,6 @@
 //! What a search aligns against: a map pyramid, and the free space seen by its scans.
 
-use super::dense::DenseGrid;
+use super::score::DenseGrid;
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::Pose;
@@ -66,6 +66,12 @@ impl SearchTarget {
             self.free[level] = add_free_space(grid, cloud, pose, self.pyramid.level(level));
         }
         Ok(())
+    }
+
+    /// The finest voxel edge, metres: the resolution every search of this target runs at
+    /// (whatever [`super::SearchParams::resolution`] says).
+    pub fn resolution(&self) -> f64 {
+        self.pyramid.base().resolution()
     }
 
     /// The map pyramid.

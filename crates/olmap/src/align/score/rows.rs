@@ -128,8 +128,8 @@ impl Scores {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::align::cells::tests::lcg;
-    use crate::align::dense::DenseGrid;
+    use crate::align::score::cells::tests::lcg;
+    use crate::align::score::DenseGrid;
     use crate::geometry::VoxelKey;
     use crate::occupancy::OccupancyList;
 

@@ -1,0 +1,233 @@
+//! Scoring the candidate poses of one lattice level (thesis §5.3.3), and the uniform
+//! start over a region: what the multi-resolution and the exhaustive searches share.
+//!
+//! Poses sharing a rotation are evaluated together: the scan's voxel centres are rotated
+//! once, `floor((R c + t0) / cell)` is computed once, and every translation of the group
+//! is an integer offset of those keys (§5.3.3): a chunk of translations per pass over the
+//! scan ([`CellGrid`]), or, when they fill a box (the coarsest level of a global search),
+//! the whole box at once as a correlation of rows ([`RowGrid`]). Groups run in parallel;
+//! every ordering and tie is resolved by the pose indices, so the result is the same for
+//! any number of threads.
+
+use rayon::prelude::*;
+
+use super::lattice::{key_of, rank, region_counts, threshold, Cand, Lattice, Problem, Scored};
+use super::params::{Dof, Locus, Region, SearchParams};
+use super::score::CellGrid;
+use super::score::DenseGrid;
+use super::score::RowGrid;
+use crate::geometry::VoxelKey;
+use crate::occupancy::{OccupancyList, Pyramid};
+
+/// Scores every candidate, in candidate order.
+pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
+    let l = &problem.lattice;
+    let cell = l.cell(level);
+    let scan = &problem.scan[level];
+    let cells = problem.cells[level]
+        .get_or_init(|| CellGrid::new(problem.levels[level], problem.free[level]))
+        .as_ref();
+    let map = problem.levels[level];
+    let free = problem.free[level];
+    // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.
+    debug_assert!(cands.is_sorted(), "candidates must come sorted");
+    let groups: Vec<([i32; 3], Vec<[i32; 3]>)> = cands
+        .chunk_by(|a, b| a.r == b.r)
+        .map(|g| (g[0].r, g.iter().map(|c| c.t).collect()))
+        .collect();
+    let boxes: Vec<Option<TranslationBox>> = groups.iter().map(|(_, ts)| dense_box(ts)).collect();
+    let rows = match (cells, boxes.iter().any(Option::is_some)) {
+        (Some(c), true) => problem.rows[level].get_or_init(|| RowGrid::new(c)).as_ref(),
+        _ => None,
+    };
+    let scored: Vec<Vec<Scored>> = groups
+        .par_iter()
+        .zip(&boxes)
+        .map(|((r, ts), bx)| {
+            let probe = Cand {
+                r: *r,
+                t: [0, 0, 0],
+            };
+            let [yaw, pitch, roll] = l.angles(&probe, level);
+            let rot = crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll);
+            let base: Vec<[i64; 3]> = scan.iter().map(|c| key_of(&rot, c, l.t0, cell)).collect();
+            let by_box = rows
+                .zip(bx.as_ref())
+                .and_then(|(g, b)| Some((g.score_box(&base, b.lo, b.n)?, b.lo)));
+            let counts: Vec<(u32, u32)> = match (by_box, cells) {
+                (Some((scores, lo)), _) => ts
+                    .iter()
+                    .map(|t| scores.get([0, 1, 2].map(|i| (t[i] as i64 - lo[i]) as usize)))
+                    .collect(),
+                (None, Some(g)) => g.score(&base, ts),
+                (None, None) => ts
+                    .iter()
+                    .map(|t| count_hashed(&base, *t, map, free))
+                    .collect(),
+            };
+            ts.iter()
+                .zip(counts)
+                .map(|(t, (hits, conflicts))| Scored {
+                    score: 2 * hits as i64 - conflicts as i64,
+                    hits,
+                    cand: Cand { r: *r, t: *t },
+                })
+                .collect()
+        })
+        .collect();
+    scored.into_iter().flatten().collect()
+}
+
+/// The translations of a rotation group as a box: its first corner and size.
+struct TranslationBox {
+    lo: [i64; 3],
+    n: [usize; 3],
+}
+
+/// The bounding box of a group's translations when scoring the whole box beats scoring them
+/// one by one: enough of them ([`MIN_BOX_POSES`]), filling at least half the box.
+fn dense_box(ts: &[[i32; 3]]) -> Option<TranslationBox> {
+    if ts.len() < MIN_BOX_POSES {
+        return None;
+    }
+    let mut lo = [i64::MAX; 3];
+    let mut hi = [i64::MIN; 3];
+    for t in ts {
+        for i in 0..3 {
+            lo[i] = lo[i].min(t[i] as i64);
+            hi[i] = hi[i].max(t[i] as i64);
+        }
+    }
+    let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
+    (n[0] * n[1] * n[2] <= 2 * ts.len()).then_some(TranslationBox { lo, n })
+}
+
+/// The fewest poses of one rotation scored as a box.
+const MIN_BOX_POSES: usize = 64;
+
+/// Hits and conflicts of the keys moved by `t`, looked up in the hash table (for levels too
+/// large for [`CellGrid`]).
+fn count_hashed(
+    base: &[[i64; 3]],
+    t: [i32; 3],
+    map: &OccupancyList,
+    free: Option<&DenseGrid>,
+) -> (u32, u32) {
+    let (mut hits, mut conflicts) = (0u32, 0u32);
+    let key = |v: i64| i32::try_from(v).ok();
+    for b in base {
+        let (x, y, z) = (b[0] + t[0] as i64, b[1] + t[1] as i64, b[2] + t[2] as i64);
+        let occupied = match (key(x), key(y), key(z)) {
+            (Some(x), Some(y), Some(z)) => map.count(VoxelKey::new(x, y, z)) > 0,
+            _ => false,
+        };
+        if occupied {
+            hits += 1;
+        } else if free.is_some_and(|f| f.contains(x, y, z)) {
+            conflicts += 1;
+        }
+    }
+    (hits, conflicts)
+}
+
+/// Evaluates the candidates of a level and ranks the ones within `keep_ratio` of the best:
+/// those poses, best first, the best pose's hits, and how many poses were evaluated.
+pub(super) fn score_level(
+    problem: &Problem,
+    cands: &[Cand],
+    level: usize,
+    keep_ratio: f64,
+) -> (Vec<Scored>, u32, usize) {
+    let mut scored = evaluate(problem, cands, level);
+    let evaluated = scored.len();
+    let best = scored.iter().map(|s| s.score).max().unwrap_or(0);
+    let cut = threshold(best, keep_ratio);
+    // Only the poses that pass are ranked: at the coarsest level they are a few hundred
+    // of a few hundred thousand.
+    scored.retain(|s| s.score >= cut);
+    rank(&mut scored);
+    let best_hits = scored.first().map_or(0, |s| s.hits);
+    (scored, best_hits, evaluated)
+}
+
+/// The uniform start over the region at `level`.
+pub(super) fn initial_candidates(
+    problem: &Problem,
+    params: &SearchParams,
+    target: &Pyramid,
+    level: usize,
+) -> Vec<Cand> {
+    let l = &problem.lattice;
+    let Some(([nyaw, ntilt, _], [nx, ny, nz])) = region_counts(problem, params, target, level)
+    else {
+        let dth = l.dtheta(level);
+        let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
+        let ntilt = match params.dof {
+            Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
+            _ => 1,
+        };
+        let Region::Locus(locus) = params.region else {
+            unreachable!("region_counts covers the other regions")
+        };
+        return locus_candidates(l, &locus, level, ntilt);
+    };
+    let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
+    for a in 0..nyaw {
+        for b in 0..ntilt {
+            for g in 0..ntilt {
+                for x in 0..nx {
+                    for y in 0..ny {
+                        for z in 0..nz {
+                            out.push(Cand {
+                                r: [a, b, g],
+                                t: [x, y, z],
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The start of a locus search at `level`: the lattice poses nearest to samples of the
+/// locus (every `t` step of the level's angular step, or finer along a wide circle), with
+/// `slack` cells around them in x, y and z, and every tilt index.
+fn locus_candidates(l: &Lattice, locus: &Locus, level: usize, ntilt: i32) -> Vec<Cand> {
+    let cell = l.cell(level);
+    let dth = l.dtheta(level);
+    let k = locus.slack_cells(cell) as i32;
+    let kz = if l.searched_t[2] { k } else { 0 };
+    let n = locus.samples(cell, dth);
+    let mut out = Vec::new();
+    for s in 0..n {
+        let t = s as f64 * std::f64::consts::TAU / n as f64;
+        let p = locus.pose_at(t).translation();
+        let index = |v: f64, o: f64| ((v - o) / cell).round() as i32;
+        let yaw = ((t - l.angle0[0]) / dth).round() as i32;
+        let (ix, iy) = (index(p.x, l.t0.x), index(p.y, l.t0.y));
+        let iz = if l.searched_t[2] {
+            index(p.z, l.t0.z)
+        } else {
+            0
+        };
+        for b in 0..ntilt {
+            for g in 0..ntilt {
+                for dx in -k..=k {
+                    for dy in -k..=k {
+                        for dz in -kz..=kz {
+                            out.push(Cand {
+                                r: [yaw, b, g],
+                                t: [ix + dx, iy + dy, iz + dz],
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}

@@ -1,0 +1,100 @@
+//! The pose lattice every search shares, and the shared core the searches build on: the
+//! prepared problem ([`Problem`]), scored candidates, ranking and the finished
+//! [`Alignment`].
+//!
+//! Poses live on a lattice that refines with the levels. At level `l` the cell is
+//! `resolution * 2^l` and the angular step `dθ = cell / R` (thesis (5.6)); a pose is
+//! `t = t0 + i * cell` (integer `i` per axis) and `angle = angle0 + j * dθ`. Halving the
+//! cell halves both steps, so a pose `(i, j)` at one level is `(2i, 2j)` at the next, and
+//! its resampling (Algorithm 6: ±half a cell, ±dθ) is `(2i + {-1, 0, 1}, 2j + {-1, 0, 1})`.
+//!
+//! This module depends on the scoring kernels only; the searches (multi-resolution,
+//! exhaustive, exact) depend on it and never on one another's loops.
+
+mod outcome;
+mod problem;
+
+use nalgebra::{Point3, Vector3};
+
+use crate::geometry::Pose;
+
+pub(crate) use self::outcome::{finish, level_report, no_overlap, rank, threshold, Scored};
+pub use self::outcome::{Alignment, Candidate, LevelReport};
+pub(crate) use self::problem::{prepare, region_counts, Problem};
+
+/// One pose of the lattice: rotation indices (yaw, pitch, roll) and translation indices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub(crate) struct Cand {
+    pub(crate) r: [i32; 3],
+    pub(crate) t: [i32; 3],
+}
+
+/// Everything the lattice needs to turn indices into poses.
+pub(crate) struct Lattice {
+    pub(crate) t0: Vector3<f64>,
+    pub(crate) angle0: [f64; 3],
+    pub(crate) finest: f64,
+    pub(crate) range: f64,
+    pub(crate) searched_t: [bool; 3],
+    pub(crate) searched_r: [bool; 3],
+}
+
+impl Lattice {
+    pub(crate) fn cell(&self, level: usize) -> f64 {
+        self.finest * (1u64 << level) as f64
+    }
+
+    pub(crate) fn dtheta(&self, level: usize) -> f64 {
+        self.cell(level) / self.range
+    }
+
+    pub(crate) fn angles(&self, c: &Cand, level: usize) -> [f64; 3] {
+        let d = self.dtheta(level);
+        [0, 1, 2].map(|i| self.angle0[i] + c.r[i] as f64 * d)
+    }
+
+    pub(crate) fn pose(&self, c: &Cand, level: usize) -> Pose {
+        let [yaw, pitch, roll] = self.angles(c, level);
+        let cell = self.cell(level);
+        let t = self.t0 + Vector3::new(c.t[0] as f64, c.t[1] as f64, c.t[2] as f64) * cell;
+        Pose::from_xyz_ypr(t.x, t.y, t.z, yaw, pitch, roll)
+    }
+
+    /// Algorithm 6: the poses around `c` at the next finer level.
+    pub(crate) fn children(&self, c: &Cand, out: &mut Vec<Cand>) {
+        let span = |searched: bool| if searched { -1..=1 } else { 0..=0 };
+        for a in span(self.searched_r[0]) {
+            for b in span(self.searched_r[1]) {
+                for g in span(self.searched_r[2]) {
+                    for x in span(self.searched_t[0]) {
+                        for y in span(self.searched_t[1]) {
+                            for z in span(self.searched_t[2]) {
+                                out.push(Cand {
+                                    r: [2 * c.r[0] + a, 2 * c.r[1] + b, 2 * c.r[2] + g],
+                                    t: [2 * c.t[0] + x, 2 * c.t[1] + y, 2 * c.t[2] + z],
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The cell of a scan voxel centre `c` rotated by `rot` and moved by `t0`: the one formula
+/// every search uses, so that they score a pose bit for bit alike.
+#[inline]
+pub(crate) fn key_of(
+    rot: &nalgebra::Rotation3<f64>,
+    c: &Point3<f64>,
+    t0: Vector3<f64>,
+    cell: f64,
+) -> [i64; 3] {
+    let p = rot * c.coords + t0;
+    [
+        (p.x / cell).floor() as i64,
+        (p.y / cell).floor() as i64,
+        (p.z / cell).floor() as i64,
+    ]
+}

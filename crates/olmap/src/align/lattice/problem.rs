@@ -1,0 +1,208 @@
+//! The scan and the target prepared for searching: parameter checks, the scan's voxel
+//! centres per level, the lattice's origin and steps, and the region's index counts.
+
+use std::sync::OnceLock;
+
+use nalgebra::{Point3, Vector3};
+
+use super::Lattice;
+use crate::align::params::{Dof, Region, SearchParams};
+use crate::align::score::CellGrid;
+use crate::align::score::DenseGrid;
+use crate::align::score::RowGrid;
+use crate::align::target::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::occupancy::{OccupancyList, Pyramid};
+
+/// The scan and the target prepared for searching.
+pub(crate) struct Problem<'a> {
+    /// Scan voxel centres per level (sensor frame).
+    pub(crate) scan: Vec<Vec<Point3<f64>>>,
+    /// Per level, built when first needed: the dense cells, or `None` when the box is too
+    /// large (the hash table of `levels` and the free grid answer instead).
+    pub(crate) cells: Vec<OnceLock<Option<CellGrid>>>,
+    /// Per level, built when first needed: the cells as rows for scoring boxes of
+    /// translations.
+    pub(crate) rows: Vec<OnceLock<Option<RowGrid>>>,
+    pub(crate) levels: Vec<&'a OccupancyList>,
+    pub(crate) free: Vec<Option<&'a DenseGrid>>,
+    pub(crate) lattice: Lattice,
+    /// Finest-level target voxels and bounding volume in cells.
+    pub(crate) map_voxels: u64,
+    pub(crate) map_cells: f64,
+}
+
+fn check(params: &SearchParams) -> Result<()> {
+    let bad = |what: &str| Err(Error::InvalidArgument(what.to_string()));
+    if !(params.resolution.is_finite() && params.resolution > 0.0) {
+        return bad("search resolution must be > 0 m");
+    }
+    if params.levels > 12 {
+        return bad("search levels must be 0 (automatic) to 12");
+    }
+    if !(params.keep_ratio > 0.0 && params.keep_ratio <= 1.0) {
+        return bad("keep_ratio must be in (0, 1]");
+    }
+    if params.max_scan_voxels == 0 {
+        return bad("max_scan_voxels must be positive");
+    }
+    if !(params.max_range.is_finite() && params.max_range > 0.0) {
+        return bad("max_range must be > 0 m");
+    }
+    if let Region::Window { xy, z, yaw } = params.region {
+        if [xy, z, yaw].iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad("window half-widths must be >= 0");
+        }
+    }
+    if let Region::Locus(l) = params.region {
+        let values = [
+            l.center[0],
+            l.center[1],
+            l.center[2],
+            l.radius,
+            l.phase,
+            l.slack,
+        ];
+        if values.iter().any(|v| !v.is_finite()) || l.radius < 0.0 || l.slack < 0.0 {
+            return bad("a locus needs a finite centre and phase, radius >= 0 and slack >= 0");
+        }
+    }
+    if let Dof::SixDof { max_tilt } = params.dof {
+        if !(max_tilt.is_finite() && max_tilt >= 0.0) {
+            return bad("max_tilt must be >= 0");
+        }
+    }
+    Ok(())
+}
+
+/// Evenly spaced voxel centres (at most `max`) of a list, in key order.
+fn centres(list: &OccupancyList, max: usize) -> Vec<Point3<f64>> {
+    let sorted = list.sorted();
+    let step = sorted.len().div_ceil(max).max(1);
+    sorted
+        .iter()
+        .step_by(step)
+        .map(|(k, _)| list.center(*k))
+        .collect()
+}
+
+pub(crate) fn prepare<'a>(
+    source: &PointCloud,
+    target: &'a SearchTarget,
+    params: &SearchParams,
+) -> Result<Problem<'a>> {
+    check(params)?;
+    let pyramid = &target.pyramid;
+    // The target alone fixes the finest resolution (`params.resolution` only built it).
+    let res = target.resolution();
+    let scan_cloud = source.range_band(0.0, params.max_range);
+    if scan_cloud.is_empty() {
+        return Err(Error::InvalidArgument(format!(
+            "the source has no point within {} m of its sensor",
+            params.max_range
+        )));
+    }
+    let bbox = pyramid
+        .base()
+        .stats()
+        .bbox
+        .ok_or_else(|| Error::InvalidArgument("the target is empty".into()))?;
+    let base_scan = OccupancyList::from_cloud(&scan_cloud, res)?;
+    let mut scan = Vec::with_capacity(pyramid.levels());
+    for level in 0..pyramid.levels() {
+        let l = base_scan.downsample(1 << level)?;
+        scan.push(centres(&l, params.max_scan_voxels));
+    }
+    let reach = scan_cloud.stats().range.map_or(params.max_range, |r| r.max);
+    let range = reach.clamp(res, params.max_range);
+    let prior = &params.prior;
+    let pt = prior.translation();
+    let (yaw_p, pitch_p, roll_p) = prior.yaw_pitch_roll();
+    let tilt = match params.dof {
+        Dof::SixDof { max_tilt } => Some(max_tilt),
+        _ => None,
+    };
+    // A locus fixes the height (beacon height on a flat floor, thesis §6.3.3).
+    let search_z = !matches!(params.dof, Dof::XyYaw) && !matches!(params.region, Region::Locus(_));
+    let (t0, angle0_yaw) = match params.region {
+        Region::Global => (
+            Vector3::new(
+                bbox.min.x,
+                bbox.min.y,
+                if search_z { bbox.min.z } else { pt.z },
+            ),
+            0.0,
+        ),
+        Region::Window { xy, z, yaw } => (
+            Vector3::new(pt.x - xy, pt.y - xy, if search_z { pt.z - z } else { pt.z }),
+            yaw_p - yaw,
+        ),
+        // The lattice is anchored at the locus's centre: a fixed position (6.2) is a
+        // lattice point at every level.
+        Region::Locus(l) => (Vector3::new(l.center[0], l.center[1], l.center[2]), 0.0),
+    };
+    let lattice = Lattice {
+        t0,
+        angle0: [
+            angle0_yaw,
+            pitch_p - tilt.unwrap_or(0.0),
+            roll_p - tilt.unwrap_or(0.0),
+        ],
+        finest: res,
+        range,
+        searched_t: [true, true, search_z],
+        searched_r: [true, tilt.is_some(), tilt.is_some()],
+    };
+    let e = bbox.extent();
+    Ok(Problem {
+        scan,
+        cells: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
+        rows: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
+        levels: (0..pyramid.levels()).map(|l| pyramid.level(l)).collect(),
+        free: target.free.iter().map(Option::as_ref).collect(),
+        lattice,
+        map_voxels: pyramid.base().len() as u64,
+        map_cells: (e.x / res).max(1.0) * (e.y / res).max(1.0) * (e.z / res).max(1.0),
+    })
+}
+
+/// The lattice indices of the region at `level`: rotation counts (yaw, pitch, roll) and
+/// translation counts (x, y, z); indices run from 0 to the count. `None` for a locus.
+pub(crate) fn region_counts(
+    problem: &Problem,
+    params: &SearchParams,
+    target: &Pyramid,
+    level: usize,
+) -> Option<([i32; 3], [i32; 3])> {
+    let l = &problem.lattice;
+    let cell = l.cell(level);
+    let dth = l.dtheta(level);
+    let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
+    let ext = target
+        .base()
+        .stats()
+        .bbox
+        .map_or(Vector3::zeros(), |b| b.extent());
+    let ntilt = match params.dof {
+        Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
+        _ => 1,
+    };
+    let (nx, ny, nz, nyaw) = match params.region {
+        Region::Global => (
+            count(ext.x, cell),
+            count(ext.y, cell),
+            count(ext.z, cell),
+            ((std::f64::consts::TAU / dth).ceil() as i32).max(1),
+        ),
+        Region::Window { xy, z, yaw } => (
+            count(2.0 * xy, cell),
+            count(2.0 * xy, cell),
+            count(2.0 * z, cell),
+            count(2.0 * yaw, dth),
+        ),
+        Region::Locus(_) => return None,
+    };
+    let nz = if l.searched_t[2] { nz } else { 1 };
+    Some(([nyaw, ntilt, ntilt], [nx, ny, nz]))
+}
