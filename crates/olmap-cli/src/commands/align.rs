@@ -11,7 +11,6 @@ use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
 use olmap::io::{self, ReadOptions};
 use olmap::occupancy::{self, MapFormat};
-use serde_json::json;
 
 use crate::args::{parse_numbers, parse_pose, set_threads, DofArgs, ThreadsArgs};
 
@@ -135,56 +134,21 @@ fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
     })
 }
 
-fn matrix_rows(p: &Pose) -> Vec<Vec<f64>> {
-    let m = p.to_matrix4();
-    (0..4)
-        .map(|i| (0..4).map(|j| m[(i, j)]).collect())
-        .collect()
-}
-
 fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
     let t = r.pose.translation();
     let (y, p, ro) = r.pose.yaw_pitch_roll();
     let s = &r.search;
     if a.json {
-        let levels: Vec<_> = s
-            .levels
-            .iter()
-            .map(|l| {
-                json!({"level": l.level, "resolution": l.resolution, "angular_step_deg": l.angular_step.to_degrees(),
-                       "scan_voxels": l.scan_voxels, "evaluated": l.evaluated, "passed": l.passed,
-                       "survivors": l.survivors, "best_overlap": l.best_overlap, "seconds": l.seconds})
-            })
-            .collect();
-        let refine = r.refinement.as_ref().map(|f| {
-            json!({"T_target_source": matrix_rows(&f.pose), "converged": f.converged, "iterations": f.iterations,
-                   "inlier_rms": f.inlier_rms, "inlier_fraction": f.inlier_fraction,
-                   "degeneracy": {"eigenvalues": f.degeneracy.eigenvalues, "condition": f.degeneracy.condition,
-                                  "weak": f.degeneracy.weak}, "seconds": f.seconds})
-        });
-        let v = json!({
-            "source": a.source.display().to_string(),
-            "target": a.target.display().to_string(),
-            "T_target_source": matrix_rows(&r.pose),
-            "translation": [t.x, t.y, t.z],
-            "yaw_pitch_roll_deg": [y.to_degrees(), p.to_degrees(), ro.to_degrees()],
-            "overlap": s.overlap,
-            "overlap_fraction": s.overlap_fraction,
-            "significance": s.significance,
-            "ambiguity": s.ambiguity,
-            "trusted": r.trusted,
-            "doubts": r.doubts,
-            "search": {"T_target_source": matrix_rows(&s.pose), "evaluated": s.evaluated,
-                       "guard_acted": s.guard_acted, "seconds": s.seconds, "levels": levels,
-                       "exact": s.exact, "score": s.score},
-            "refinement": refine,
-            "seconds": r.seconds,
-        });
+        let v = align::AlignmentReport::new(
+            r,
+            &a.source.display().to_string(),
+            &a.target.display().to_string(),
+        );
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
     println!("T_target_source:");
-    for row in matrix_rows(&r.pose) {
+    for row in align::matrix_rows(&r.pose) {
         println!(
             "  {:>12.6} {:>12.6} {:>12.6} {:>12.6}",
             row[0], row[1], row[2], row[3]

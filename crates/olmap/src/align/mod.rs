@@ -9,6 +9,7 @@ mod lattice;
 mod multires;
 mod params;
 mod register;
+mod report;
 mod score;
 mod search;
 mod significance;
@@ -21,6 +22,10 @@ pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds, REFINE_REACH_CELLS,
+};
+pub use report::{
+    matrix_rows, AlignmentReport, DegeneracyJson, LevelJson, Matrix4Rows, RefinementReport,
+    SearchReport,
 };
 pub use search::{global_search, search};
 pub use significance::significance;

@@ -1,0 +1,194 @@
+//! [`AlignmentReport`]: the typed, serialisable report of one registration (`olmap align
+//! --json`, `olmap localize --json`): the pose as a 4x4 matrix and as metres and degrees,
+//! the search's figures level by level, the refinement and the verdict.
+
+use serde::{Deserialize, Serialize};
+
+use super::icp::IcpResult;
+use super::{LevelReport, Registration};
+use crate::geometry::Pose;
+
+/// A row-major 4x4 homogeneous matrix.
+pub type Matrix4Rows = [[f64; 4]; 4];
+
+/// The rows of `p`'s 4x4 matrix.
+pub fn matrix_rows(p: &Pose) -> Matrix4Rows {
+    let m = p.to_matrix4();
+    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
+}
+
+/// The report of a registration of `source` onto `target`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AlignmentReport {
+    /// The scan placed.
+    pub source: String,
+    /// What it was placed in (a cloud or a map).
+    pub target: String,
+    /// The final `T_target_source` (after the refinement when there was one).
+    #[serde(rename = "T_target_source")]
+    pub t_target_source: Matrix4Rows,
+    /// Its translation, metres.
+    pub translation: [f64; 3],
+    /// Its ZYX angles, degrees.
+    pub yaw_pitch_roll_deg: [f64; 3],
+    /// Voxels of the scan that hit the target at the search's pose (finest level).
+    pub overlap: u64,
+    /// `overlap` over the scan's voxels.
+    pub overlap_fraction: f64,
+    /// The significance of the overlap (standard deviations above the lattice's mean).
+    pub significance: f64,
+    /// Distinct near-best solutions.
+    pub ambiguity: usize,
+    /// Whether every test of the verdict passed.
+    pub trusted: bool,
+    /// The failed tests, in words.
+    pub doubts: Vec<String>,
+    /// The global search.
+    pub search: SearchReport,
+    /// The refinement, when run.
+    pub refinement: Option<RefinementReport>,
+    /// Wall time of the whole registration, seconds.
+    pub seconds: f64,
+}
+
+/// The search part of an [`AlignmentReport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SearchReport {
+    /// The search's `T_target_source`.
+    #[serde(rename = "T_target_source")]
+    pub t_target_source: Matrix4Rows,
+    /// Poses scored.
+    pub evaluated: usize,
+    /// Whether the survivor cap cut a level.
+    pub guard_acted: bool,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// The levels, coarse to fine.
+    pub levels: Vec<LevelJson>,
+    /// Whether the exact search ran.
+    pub exact: bool,
+    /// The best score.
+    pub score: i64,
+}
+
+/// One search level.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LevelJson {
+    /// Level index (0 = finest).
+    pub level: usize,
+    /// Voxel edge, metres.
+    pub resolution: f64,
+    /// Angular step, degrees.
+    pub angular_step_deg: f64,
+    /// Scan voxels at the level.
+    pub scan_voxels: usize,
+    /// Poses scored.
+    pub evaluated: usize,
+    /// Poses that passed the level's threshold.
+    pub passed: usize,
+    /// Survivors carried to the next level.
+    pub survivors: usize,
+    /// The level's best overlap.
+    pub best_overlap: u64,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+impl From<&LevelReport> for LevelJson {
+    fn from(l: &LevelReport) -> Self {
+        LevelJson {
+            level: l.level,
+            resolution: l.resolution,
+            angular_step_deg: l.angular_step.to_degrees(),
+            scan_voxels: l.scan_voxels,
+            evaluated: l.evaluated,
+            passed: l.passed,
+            survivors: l.survivors,
+            best_overlap: l.best_overlap,
+            seconds: l.seconds,
+        }
+    }
+}
+
+/// The refinement part of an [`AlignmentReport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefinementReport {
+    /// The refined `T_target_source`.
+    #[serde(rename = "T_target_source")]
+    pub t_target_source: Matrix4Rows,
+    /// Whether it converged.
+    pub converged: bool,
+    /// Iterations run.
+    pub iterations: usize,
+    /// RMS distance of the inliers, metres.
+    pub inlier_rms: f64,
+    /// Share of source points with an inlier correspondence.
+    pub inlier_fraction: f64,
+    /// How well each direction was constrained.
+    pub degeneracy: DegeneracyJson,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// The degeneracy of the refinement's normal equations.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DegeneracyJson {
+    /// Eigenvalues, ascending.
+    pub eigenvalues: [f64; 6],
+    /// Largest over smallest eigenvalue.
+    pub condition: f64,
+    /// The weakly constrained directions, named.
+    pub weak: Vec<String>,
+}
+
+impl From<&IcpResult> for RefinementReport {
+    fn from(f: &IcpResult) -> Self {
+        RefinementReport {
+            t_target_source: matrix_rows(&f.pose),
+            converged: f.converged,
+            iterations: f.iterations,
+            inlier_rms: f.inlier_rms,
+            inlier_fraction: f.inlier_fraction,
+            degeneracy: DegeneracyJson {
+                eigenvalues: f.degeneracy.eigenvalues,
+                condition: f.degeneracy.condition,
+                weak: f.degeneracy.weak.clone(),
+            },
+            seconds: f.seconds,
+        }
+    }
+}
+
+impl AlignmentReport {
+    /// The report of `r`, a registration of `source` onto `target` (as the caller names
+    /// them: file paths for the CLI).
+    pub fn new(r: &Registration, source: &str, target: &str) -> Self {
+        let s = &r.search;
+        let t = r.pose.translation();
+        let (y, p, ro) = r.pose.yaw_pitch_roll();
+        AlignmentReport {
+            source: source.to_string(),
+            target: target.to_string(),
+            t_target_source: matrix_rows(&r.pose),
+            translation: [t.x, t.y, t.z],
+            yaw_pitch_roll_deg: [y.to_degrees(), p.to_degrees(), ro.to_degrees()],
+            overlap: s.overlap,
+            overlap_fraction: s.overlap_fraction,
+            significance: s.significance,
+            ambiguity: s.ambiguity,
+            trusted: r.trusted,
+            doubts: r.doubts.clone(),
+            search: SearchReport {
+                t_target_source: matrix_rows(&s.pose),
+                evaluated: s.evaluated,
+                guard_acted: s.guard_acted,
+                seconds: s.seconds,
+                levels: s.levels.iter().map(LevelJson::from).collect(),
+                exact: s.exact,
+                score: s.score,
+            },
+            refinement: r.refinement.as_ref().map(RefinementReport::from),
+            seconds: r.seconds,
+        }
+    }
+}
