@@ -1,0 +1,316 @@
+//! The batch mapper of thesis §6.4.1 ([`super::MapMode::Batch`]): every round aligns the
+//! remaining scans to the map and adds the best one, so scans that overlap the map little
+//! wait until it has grown to them. Results whose map region did not change are reused.
+
+use super::register::Found;
+use super::state::{footprint, overlaps, State};
+use super::{placed_record, Placing};
+use crate::align::Registration;
+use crate::error::Result;
+use crate::geometry::Aabb;
+use crate::mapping::links::Placement;
+use crate::occupancy::OccupancyList;
+
+/// How many stale scans the batch mapper retries before looking for a trusted result.
+const RETRY_GROUP: usize = 4;
+
+/// A batch mapper's cached registration: the result, what found it, and the scan's
+/// footprint in the map at the result.
+struct Candidate {
+    /// The registration.
+    registration: Registration,
+    /// What found it.
+    via: Placement,
+    /// The scan's box in the map at the registration's pose.
+    footprint: Option<Aabb>,
+}
+
+/// What the batch mapper knows about one scan not yet placed.
+struct Pending {
+    /// Its cached registration, if any.
+    cached: Option<Candidate>,
+    /// How many scans were placed when it was last tried (`usize::MAX` before its first
+    /// round).
+    attempted_at: usize,
+    /// Whether odometry places it outside the map so far.
+    far: bool,
+    /// Whether it was searched anyway once (the last resort).
+    forced: bool,
+    /// Whether its cached (trusted) score was refreshed at its pose after the map grew: it
+    /// is confirmed by a window search before it joins.
+    provisional: bool,
+    /// The scan's voxels, for those refreshes.
+    voxels: Option<OccupancyList>,
+}
+
+impl Pending {
+    fn new() -> Self {
+        Pending {
+            cached: None,
+            attempted_at: usize::MAX,
+            far: false,
+            forced: false,
+            provisional: false,
+            voxels: None,
+        }
+    }
+
+    /// Whether its cached registration is trusted.
+    fn trusted(&self) -> bool {
+        self.cached.as_ref().is_some_and(|c| c.registration.trusted)
+    }
+
+    /// Drops its cached registration: it searches again next round.
+    fn forget(&mut self) {
+        self.cached = None;
+        self.provisional = false;
+    }
+}
+
+/// The batch mapper at work: the map state and every scan's [`Pending`] record.
+struct Batch<'s, 'a> {
+    state: &'s mut State<'a>,
+    pending: Vec<Pending>,
+}
+
+/// Places scans best overlap first until every scan is placed or none can be trusted; the
+/// doubts of the scans left over go to `placing`.
+pub(super) fn place_best_first(
+    state: &mut State<'_>,
+    placing: &mut Placing,
+    progress: &mut impl FnMut(usize, usize),
+) -> Result<()> {
+    let n = state.scans.len();
+    let mut batch = Batch {
+        state,
+        pending: (0..n).map(|_| Pending::new()).collect(),
+    };
+    loop {
+        let unplaced: Vec<usize> = (0..n).filter(|&s| batch.state.poses[s].is_none()).collect();
+        if unplaced.is_empty() {
+            break;
+        }
+        for &s in &unplaced {
+            if batch.pending[s].attempted_at == usize::MAX {
+                batch.pending[s].attempted_at = 0;
+            }
+        }
+        let Some(s) = batch.choose(&unplaced, placing.placed.len())? else {
+            for &u in &unplaced {
+                placing.last_doubts[u] = batch.pending[u]
+                    .cached
+                    .as_ref()
+                    .map(|c| c.registration.doubts.clone());
+            }
+            break;
+        };
+        let Some(chosen) = batch.confirm(s)? else {
+            continue;
+        };
+        let r = &chosen.registration;
+        batch.state.place(s, r.pose)?;
+        let name = &batch.state.scans[s].name;
+        let record = placed_record(s, name, placing.placed.len(), r, chosen.via);
+        placing.placed.push(record);
+        progress(placing.placed.len(), n);
+        batch.after_placing(s, chosen.footprint.as_ref(), &unplaced)?;
+    }
+    Ok(())
+}
+
+impl Batch<'_, '_> {
+    /// The unplaced scan whose cached result is the best trusted one (largest overlap
+    /// fraction, then significance, then smallest index).
+    fn best_trusted(&self, unplaced: &[usize]) -> Option<usize> {
+        unplaced
+            .iter()
+            .filter_map(|&s| {
+                self.pending[s]
+                    .cached
+                    .as_ref()
+                    .filter(|c| c.registration.trusted)
+                    .map(|c| (s, c))
+            })
+            .max_by(|a, b| {
+                let (ra, rb) = (&a.1.registration.search, &b.1.registration.search);
+                (ra.overlap_fraction, ra.significance)
+                    .partial_cmp(&(rb.overlap_fraction, rb.significance))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+                    .then(b.0.cmp(&a.0))
+            })
+            .map(|(s, _)| s)
+    }
+
+    /// Registers scan `s` (unless odometry puts it outside the map) and caches the result.
+    fn try_scan(&mut self, s: usize, placed_now: usize) -> Result<()> {
+        self.pending[s].far = self.state.far_from_map(s);
+        self.pending[s].attempted_at = placed_now;
+        if !self.pending[s].far {
+            self.pending[s].cached = Some(self.attempt(s, false)?);
+        }
+        Ok(())
+    }
+
+    /// [`State::register`] with the scan's footprint at the result: a cache entry.
+    fn attempt(&mut self, s: usize, allow_global: bool) -> Result<Candidate> {
+        let Found { registration, via } = self.state.register(s, allow_global)?;
+        let footprint = footprint(&self.state.clouds[s], &registration.pose);
+        Ok(Candidate {
+            registration,
+            via,
+            footprint,
+        })
+    }
+
+    /// One round's choice, with `placed_now` scans placed: searches the scans without a
+    /// cached result (a far one once per map size), then, when nothing is trusted, the
+    /// stale scans ([`Batch::retry_stale`]) and then the far ones regardless of odometry.
+    fn choose(&mut self, unplaced: &[usize], placed_now: usize) -> Result<Option<usize>> {
+        for &s in unplaced {
+            let p = &self.pending[s];
+            if p.cached.is_none() && !(p.far && p.attempted_at == placed_now) {
+                self.try_scan(s, placed_now)?;
+            }
+        }
+        let mut best = self.best_trusted(unplaced);
+        if best.is_none() {
+            best = self.retry_stale(unplaced, placed_now)?;
+        }
+        if best.is_none() {
+            // Last resort before giving up: odometry may be wrong, search anyway.
+            let last_resort: Vec<usize> = unplaced
+                .iter()
+                .copied()
+                .filter(|&s| {
+                    let p = &self.pending[s];
+                    p.far && !p.forced && !self.state.unlinked(s)
+                })
+                .collect();
+            for s in last_resort {
+                self.pending[s].forced = true;
+                self.pending[s].far = false;
+                self.pending[s].cached = Some(self.attempt(s, true)?);
+            }
+            best = self.best_trusted(unplaced);
+        }
+        Ok(best)
+    }
+
+    /// Nothing trusted: retries every scan last tried against a smaller map (all of them:
+    /// stopping at the first trusted one let a false match in the synthetic hall win over
+    /// the true, better one). Input order is usually capture order, so scans next (by
+    /// index) to placed ones go first, a few at a time, the best of a group winning: each
+    /// retry round costs a few searches, not one per unplaced scan.
+    fn retry_stale(&mut self, unplaced: &[usize], placed_now: usize) -> Result<Option<usize>> {
+        let mut stale: Vec<usize> = unplaced
+            .iter()
+            .copied()
+            .filter(|&s| self.pending[s].attempted_at < placed_now)
+            .collect();
+        let keys: Vec<(bool, f64)> = stale.iter().map(|&s| self.state.nearness(s)).collect();
+        let mut by_key: Vec<(usize, (bool, f64))> = stale.iter().copied().zip(keys).collect();
+        by_key.sort_by(|a, b| {
+            (a.1 .0, a.1 .1, a.0)
+                .partial_cmp(&(b.1 .0, b.1 .1, b.0))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        stale = by_key.into_iter().map(|(s, _)| s).collect();
+        let mut best = None;
+        for group in stale.chunks(RETRY_GROUP) {
+            for &s in group {
+                self.try_scan(s, placed_now)?;
+            }
+            best = self.best_trusted(unplaced);
+            if best.is_some() {
+                break;
+            }
+        }
+        Ok(best)
+    }
+
+    /// Takes the chosen scan's cached result; a provisional one is confirmed by a window
+    /// search first, and one that fails goes back to the cache (`None`: choose again).
+    fn confirm(&mut self, s: usize) -> Result<Option<Candidate>> {
+        let c = self.pending[s]
+            .cached
+            .take()
+            .expect("chosen from the cache");
+        if !self.pending[s].provisional {
+            return Ok(Some(c));
+        }
+        self.pending[s].provisional = false;
+        let confirmed = self.state.register_near(s, c.registration.pose)?;
+        let checked = Candidate {
+            footprint: footprint(&self.state.clouds[s], &confirmed.pose),
+            registration: confirmed,
+            via: c.via,
+        };
+        if !checked.registration.trusted {
+            self.pending[s].cached = Some(checked);
+            return Ok(None);
+        }
+        Ok(Some(checked))
+    }
+
+    /// After scan `s` joined with footprint `fp`: the cached results its placing made
+    /// stale are dropped or refreshed.
+    fn after_placing(&mut self, s: usize, fp: Option<&Aabb>, unplaced: &[usize]) -> Result<()> {
+        // Scans linked to this one and not yet trusted search along their new loci next
+        // round.
+        for &u in unplaced {
+            let trusted = self.pending[u].trusted();
+            if u != s && !trusted && self.state.team.links[u].iter().any(|l| l.other() == s) {
+                self.pending[u].forget();
+            }
+        }
+        // Scans of the same robot that now predict from this one (fewer moves, less drift)
+        // search again around the better prediction: a result found around a prediction
+        // many moves old can be a look-alike place metres away.
+        for &u in unplaced {
+            let by_odometry = self.pending[u]
+                .cached
+                .as_ref()
+                .is_some_and(|c| !matches!(c.via, Placement::Sighting { .. }));
+            if u != s && by_odometry && self.state.predicts_from(u) == Some(s) {
+                self.pending[u].forget();
+            }
+        }
+        // Trusted results whose map region changed get their score refreshed at their pose
+        // (cheap) and are confirmed before joining; untrusted ones are retried only when
+        // nothing trusted is left.
+        for &u in unplaced {
+            let touched = match (&self.pending[u].cached, fp) {
+                (
+                    Some(Candidate {
+                        registration,
+                        footprint: Some(fu),
+                        ..
+                    }),
+                    Some(fs),
+                ) => registration.trusted && overlaps(fu, fs),
+                _ => false,
+            };
+            if touched {
+                self.refresh(u)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Refreshes scan `u`'s cached score at its pose against the map as it is now and marks
+    /// the result provisional.
+    fn refresh(&mut self, u: usize) -> Result<()> {
+        let res = self.state.params.register.search.resolution;
+        let pending = &mut self.pending[u];
+        if pending.voxels.is_none() {
+            pending.voxels = Some(OccupancyList::from_cloud(&self.state.clouds[u], res)?);
+        }
+        let list = pending.voxels.as_ref().expect("just set");
+        let entry = pending.cached.as_mut().expect("touched");
+        entry.registration.search.overlap_fraction = self
+            .state
+            .overlap_fraction_at(list, &entry.registration.pose)?;
+        pending.provisional = true;
+        Ok(())
+    }
+}

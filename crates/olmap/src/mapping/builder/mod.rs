@@ -1,0 +1,317 @@
+//! Map building from many scans: the thesis' batch mapper (best overlap first, §6.4.1)
+//! and a sequential (online) mapper, with optional odometry priors.
+
+mod batch;
+mod fuse;
+mod linked;
+mod register;
+mod sequential;
+mod state;
+
+use std::time::Instant;
+
+pub use fuse::fuse_scan_maps;
+
+use super::links::{Placement, TeamLinks};
+use crate::align::{RegisterParams, Registration};
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::geometry::Pose;
+use crate::occupancy::{OccupancyList, SensorModel};
+use state::State;
+
+/// One scan to place.
+#[derive(Debug, Clone)]
+pub struct ScanInput {
+    /// Its name (file stem), used in pose files and reports.
+    pub name: String,
+    /// The points, in the sensor frame.
+    pub cloud: PointCloud,
+    /// Its odometry pose `T_world_scan` in any fixed world frame, if known: only the
+    /// motion between scans is used.
+    pub odometry: Option<Pose>,
+}
+
+/// The order in which scans join the map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapMode {
+    /// Every round aligns all remaining scans to the map and adds the best one (thesis
+    /// §6.4.1): scans that overlap the map little wait until the map has grown to them.
+    Batch,
+    /// Scans join in the given order, each aligned to the map so far (online use).
+    Sequential,
+}
+
+/// Parameters of [`build_map`].
+#[derive(Debug, Clone)]
+pub struct MapParams {
+    /// Registration (search, refinement, trust) of each scan against the map.
+    pub register: RegisterParams,
+    /// Batch or sequential.
+    pub mode: MapMode,
+    /// Index of the scan that defines the map frame (default 0).
+    pub first: usize,
+    /// With odometry: the first search window around the predicted pose, `(xy, z, yaw)`
+    /// in metres, metres, radians (default 0.5 m, 0.3 m, 10°). A window whose result is
+    /// not trusted is doubled, twice, then the search goes global: degraded odometry is
+    /// never trusted blindly.
+    pub odometry_window: (f64, f64, f64),
+    /// Fusion: the sensor model of the ray-traced fused map.
+    pub sensor: SensorModel,
+    /// Fusion: skip a scan taken within this distance of an already fused one (position
+    /// buckets, thesis §3.3.3; 0 = off).
+    pub bucket_radius: f64,
+    /// Cleaning: drop fused voxels with a count below this (pixel mixing, thesis §4.4.1;
+    /// default 1 keeps all).
+    pub min_count: u16,
+    /// Voxel of the point map the refinement aligns to, metres (default 0.05).
+    pub refine_map_voxel: f64,
+    /// With odometry: a global result farther than this from the odometry prediction is
+    /// not trusted, metres: the larger of this and 25 % of the odometry path length from
+    /// the scan it was predicted from (default 2 m). Odometry is not trusted blindly, nor is a
+    /// global match that contradicts it by tens of metres (a repetitive building).
+    pub odometry_tolerance: f64,
+    /// Keep each placed scan's own ray-traced occupancy list, in its sensor frame, in
+    /// [`MapBuild::scan_maps`] (the thesis' scan-pose pairs, so the map can be rebuilt
+    /// when poses change; default true; costs one more ray trace and the lists' memory).
+    pub keep_scan_maps: bool,
+    /// Register with only the points whose height in their own scan frame lies in
+    /// `[z_min, z_max]` (e.g. above the floor and below the ceiling: flat floors and
+    /// ceilings match anywhere and make the search ambiguous; thesis §5.4, §6.4.2 use a
+    /// sub-ceiling band). The fused map keeps every point. Default `None` (all points).
+    pub register_band: Option<(f64, f64)>,
+}
+
+impl Default for MapParams {
+    fn default() -> Self {
+        MapParams {
+            register: RegisterParams::default(),
+            mode: MapMode::Batch,
+            first: 0,
+            odometry_window: (0.5, 0.3, 10f64.to_radians()),
+            sensor: SensorModel::default(),
+            bucket_radius: 0.0,
+            min_count: 1,
+            refine_map_voxel: 0.05,
+            odometry_tolerance: 2.0,
+            keep_scan_maps: true,
+            register_band: None,
+        }
+    }
+}
+
+/// A scan placed in the map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedScan {
+    /// Index in the input.
+    pub index: usize,
+    /// Its name.
+    pub name: String,
+    /// `T_map_scan`.
+    pub pose: Pose,
+    /// When it joined (0 = the frame scan).
+    pub order: usize,
+    /// Overlap fraction of its search (1 for the frame scan).
+    pub overlap_fraction: f64,
+    /// Significance of its search.
+    pub significance: f64,
+    /// ICP inlier fraction, if refined.
+    pub inlier_fraction: Option<f64>,
+    /// Whether its final search was global (no usable odometry window).
+    pub global: bool,
+    /// What placed it: the frame, odometry, a global search or a sighting.
+    pub via: Placement,
+}
+
+/// A scan that could not be placed, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RejectedScan {
+    /// Index in the input.
+    pub index: usize,
+    /// Its name.
+    pub name: String,
+    /// The failed trust tests of its best registration.
+    pub reasons: Vec<String>,
+}
+
+/// A placed scan's own occupancy list and its pose: what the map can be rebuilt from.
+#[derive(Debug, Clone)]
+pub struct ScanMap {
+    /// The scan's name.
+    pub name: String,
+    /// `T_map_scan`.
+    pub pose: Pose,
+    /// The scan ray traced alone, in its sensor frame (counts, free space cleared).
+    pub voxels: OccupancyList,
+}
+
+/// The result of [`build_map`].
+#[derive(Debug, Clone)]
+pub struct MapBuild {
+    /// The fused, ray-traced, cleaned occupancy list.
+    pub map: OccupancyList,
+    /// Scans in the order they joined.
+    pub placed: Vec<PlacedScan>,
+    /// Scans left out.
+    pub rejected: Vec<RejectedScan>,
+    /// Each placed scan's own occupancy list with its pose, in joining order (empty unless
+    /// [`MapParams::keep_scan_maps`]).
+    pub scan_maps: Vec<ScanMap>,
+    /// Registrations run (a measure of work: the batch mapper reuses results whose map
+    /// region did not change).
+    pub registrations: usize,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Map entropy (thesis (7.4), nats) after each placed scan was fused, in joining order,
+    /// with `p0 = 0.5`, one log-odds unit per count and `V = 0`: the volume term is one
+    /// constant for a whole run, so the curve's shape and differences are (7.4)'s.
+    pub entropy_after_scan: Vec<f64>,
+}
+
+/// The mappers' running record: the scans placed so far, in joining order, and the doubts
+/// of each scan's last untrusted registration.
+struct Placing {
+    placed: Vec<PlacedScan>,
+    last_doubts: Vec<Option<Vec<String>>>,
+}
+
+fn placed_record(
+    index: usize,
+    name: &str,
+    order: usize,
+    r: &Registration,
+    via: Placement,
+) -> PlacedScan {
+    PlacedScan {
+        index,
+        name: name.to_string(),
+        pose: r.pose,
+        order,
+        overlap_fraction: r.search.overlap_fraction,
+        significance: r.search.significance,
+        inlier_fraction: r.refinement.as_ref().map(|f| f.inlier_fraction),
+        global: via == Placement::Global,
+        via,
+    }
+}
+
+/// The number of search pyramid levels for a map framed by scan `first`: the rule of
+/// [`crate::align::SearchParams::levels_for`] applied to twice the frame scan's extent and
+/// its largest range (the parameter's maximum range when the scan has none).
+fn levels_from_extent(first: &ScanInput, params: &MapParams) -> usize {
+    let extent = first
+        .cloud
+        .bounding_box()
+        .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
+    let range = first
+        .cloud
+        .stats()
+        .range
+        .map_or(params.register.search.max_range, |r| r.max);
+    params.register.search.levels_for(extent * 2.0, range)
+}
+
+/// Builds a map from scans: places them (batch or sequential, see [`MapMode`]), then fuses
+/// the placed scans by ray tracing into one occupancy list (with optional position buckets
+/// and low-count cleaning). `progress(done, total)` is called as scans are placed.
+pub fn build_map(
+    scans: &[ScanInput],
+    params: &MapParams,
+    progress: impl FnMut(usize, usize),
+) -> Result<MapBuild> {
+    build_map_linked(scans, params, &TeamLinks::none(scans.len()), progress)
+}
+
+/// [`build_map`] for a team: scans taken by several robots (each with its own odometry
+/// frame, `team.frame`) and linked by sightings (`team.links`, thesis (6.2)-(6.4)). A scan
+/// with a link to a placed scan is searched along the link's locus first (a mutual link:
+/// a small window around the pose it gives), which is faster than a global search and
+/// cannot match elsewhere; odometry windows (within its robot's frame) and global
+/// searches follow as in [`build_map`]. [`PlacedScan::via`] records what placed each scan.
+pub fn build_map_linked(
+    scans: &[ScanInput],
+    params: &MapParams,
+    team: &TeamLinks,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<MapBuild> {
+    let start = Instant::now();
+    check_inputs(scans, params, team)?;
+    let first = &scans[params.first];
+    let mut state = State::new(scans, params, team)?;
+    state.place(params.first, Pose::identity())?;
+    let mut placing = Placing {
+        placed: vec![PlacedScan {
+            index: params.first,
+            name: first.name.clone(),
+            pose: Pose::identity(),
+            order: 0,
+            overlap_fraction: 1.0,
+            significance: f64::INFINITY,
+            inlier_fraction: None,
+            global: false,
+            via: Placement::Frame,
+        }],
+        last_doubts: vec![None; scans.len()],
+    };
+    progress(1, scans.len());
+    match params.mode {
+        MapMode::Sequential => sequential::place_in_order(&mut state, &mut placing, &mut progress)?,
+        MapMode::Batch => batch::place_best_first(&mut state, &mut placing, &mut progress)?,
+    }
+    let Placing {
+        placed,
+        last_doubts,
+    } = placing;
+    let rejected = (0..scans.len())
+        .filter(|&s| state.poses[s].is_none())
+        .map(|s| RejectedScan {
+            index: s,
+            name: scans[s].name.clone(),
+            reasons: last_doubts[s]
+                .clone()
+                .filter(|d| !d.is_empty())
+                .unwrap_or_else(|| vec!["no trusted alignment to the map".into()]),
+        })
+        .collect();
+    let fused = fuse::fuse_placed(scans, &placed, params)?;
+    Ok(MapBuild {
+        map: fused.map,
+        placed,
+        rejected,
+        scan_maps: fused.scan_maps,
+        registrations: state.registrations,
+        seconds: start.elapsed().as_secs_f64(),
+        entropy_after_scan: fused.entropy_after_scan,
+    })
+}
+
+/// The input errors of [`build_map_linked`]: no scans, team links that do not describe
+/// the scans, a frame scan index out of range.
+fn check_inputs(scans: &[ScanInput], params: &MapParams, team: &TeamLinks) -> Result<()> {
+    if scans.is_empty() {
+        return Err(Error::InvalidArgument("no scans to map".into()));
+    }
+    if team.frame.len() != scans.len()
+        || team.links.len() != scans.len()
+        || team
+            .links
+            .iter()
+            .flatten()
+            .any(|l| l.other() >= scans.len())
+    {
+        return Err(Error::InvalidArgument(format!(
+            "the team links describe {} / {} scans (or link past them), not {}",
+            team.frame.len(),
+            team.links.len(),
+            scans.len()
+        )));
+    }
+    if params.first >= scans.len() {
+        return Err(Error::InvalidArgument(format!(
+            "the first scan index {} is out of range ({} scans)",
+            params.first,
+            scans.len()
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,130 @@
+//! Registering one scan against the map: along its links first ([`super::linked`]), then in
+//! odometry windows that grow, then globally; and the odometry trust test.
+
+use super::state::State;
+use crate::align::{register_to_split, Region, RegisterParams, Registration};
+use crate::error::Result;
+use crate::geometry::Pose;
+use crate::mapping::links::Placement;
+
+/// A registration of one scan and what found it.
+#[derive(Debug, Clone)]
+pub(super) struct Found {
+    /// The registration.
+    pub(super) registration: Registration,
+    /// The search that found it: a sighting, odometry or a global search.
+    pub(super) via: Placement,
+}
+
+/// Keeps `r` as the best so far when nothing is kept yet or it overlaps the map more.
+pub(super) fn keep_better(best: &mut Option<Found>, r: Registration, via: Placement) {
+    if best
+        .as_ref()
+        .is_none_or(|b| r.search.overlap > b.registration.search.overlap)
+    {
+        *best = Some(Found {
+            registration: r,
+            via,
+        });
+    }
+}
+
+impl State<'_> {
+    /// Registers scan `s` against the map. First along the loci of its sightings of or by
+    /// placed scans (mutual first). Then, with an odometry prediction: in windows around it
+    /// that double twice, then one as wide as the odometry tolerance; a global search only
+    /// when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
+    /// Without odometry: globally. Returns the best registration and what found it.
+    pub(super) fn register(&mut self, s: usize, allow_global: bool) -> Result<Found> {
+        let mut best: Option<Found> = None;
+        let links = self.placed_links(s);
+        if let Some(found) = self.search_links(s, &links, &mut best)? {
+            return Ok(found);
+        }
+        let mut params = self.params.register.clone();
+        let prediction = self.predict(s);
+        if let Some((prior, distance)) = prediction {
+            let (xy, z, yaw) = self.params.odometry_window;
+            let tolerance = self.odometry_tolerance(distance);
+            let mut windows: Vec<f64> = vec![1.0, 2.0, 4.0];
+            if tolerance > 4.0 * xy {
+                windows.push(tolerance / xy);
+            }
+            params.search.prior = prior;
+            for grow in windows {
+                params.search.region = Region::Window {
+                    xy: xy * grow,
+                    z: z * grow,
+                    yaw: (yaw * grow).min(std::f64::consts::PI),
+                };
+                let mut r = self.run(s, &params)?;
+                check_odometry(&mut r, &prior, tolerance);
+                if r.trusted {
+                    return Ok(Found {
+                        registration: r,
+                        via: Placement::Odometry,
+                    });
+                }
+                keep_better(&mut best, r, Placement::Odometry);
+            }
+            if !allow_global {
+                return Ok(best.expect("at least one window"));
+            }
+        } else if !allow_global && !links.is_empty() {
+            // Linked but no odometry in its frame yet: the loci were the search.
+            return Ok(best.expect("at least one link"));
+        }
+        // The global search keeps the odometry prior the windows set (if any).
+        params.search.region = Region::Global;
+        let mut r = self.run(s, &params)?;
+        if let Some((prior, distance)) = prediction {
+            check_odometry(&mut r, &prior, self.odometry_tolerance(distance));
+        }
+        match best {
+            Some(b) if !r.trusted && b.registration.search.overlap > r.search.overlap => Ok(b),
+            _ => Ok(Found {
+                registration: r,
+                via: Placement::Global,
+            }),
+        }
+    }
+
+    /// Registers scan `s` in a window (the first odometry window) around `prior`: the
+    /// confirmation of a cached result before the scan joins the map.
+    pub(super) fn register_near(&mut self, s: usize, prior: Pose) -> Result<Registration> {
+        let mut params = self.params.register.clone();
+        let (xy, z, yaw) = self.params.odometry_window;
+        params.search.prior = prior;
+        params.search.region = Region::Window { xy, z, yaw };
+        let mut r = self.run(s, &params)?;
+        if let Some((predicted, distance)) = self.predict(s) {
+            check_odometry(&mut r, &predicted, self.odometry_tolerance(distance));
+        }
+        Ok(r)
+    }
+
+    /// One registration of scan `s` against the map (searching with its registration
+    /// cloud, refining with the whole scan), counted.
+    pub(super) fn run(&mut self, s: usize, params: &RegisterParams) -> Result<Registration> {
+        self.registrations += 1;
+        register_to_split(
+            &self.clouds[s],
+            &self.scans[s].cloud,
+            &self.target,
+            &self.refine_map,
+            params,
+        )
+    }
+}
+
+/// Distrusts a registration farther than `tolerance` metres from the odometry prediction
+/// `prior` (a window search snaps to coarse cells and can end past its nominal edge).
+fn check_odometry(r: &mut Registration, prior: &Pose, tolerance: f64) {
+    let off = (r.pose.translation() - prior.translation()).norm();
+    if r.trusted && off > tolerance {
+        r.trusted = false;
+        r.doubts.push(format!(
+            "the match is {off:.2} m from the odometry prediction (tolerance {tolerance:.2} m)"
+        ));
+    }
+}

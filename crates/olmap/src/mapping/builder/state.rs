@@ -1,0 +1,234 @@
+//! The mappers' shared state: the map so far (search target, refinement points, footprint
+//! box), the placed poses, and what odometry predicts for an unplaced scan.
+
+use std::borrow::Cow;
+
+use super::{levels_from_extent, MapParams, ScanInput};
+use crate::align::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::Result;
+use crate::geometry::{Aabb, Pose};
+use crate::mapping::links::TeamLinks;
+use crate::occupancy::OccupancyList;
+
+/// The map as the mappers grow it, and each scan's pose once placed.
+pub(super) struct State<'a> {
+    pub(super) scans: &'a [ScanInput],
+    /// The clouds registration uses: the scans' points, cut to
+    /// [`MapParams::register_band`] when set.
+    pub(super) clouds: Vec<Cow<'a, PointCloud>>,
+    pub(super) params: &'a MapParams,
+    pub(super) team: &'a TeamLinks,
+    pub(super) target: SearchTarget,
+    pub(super) refine_map: PointCloud,
+    pub(super) poses: Vec<Option<Pose>>,
+    pub(super) registrations: usize,
+    /// Union of the placed scans' footprints.
+    pub(super) map_box: Option<Aabb>,
+}
+
+/// The box of `cloud` moved to `pose` (`None` for an empty cloud).
+pub(super) fn footprint(cloud: &PointCloud, pose: &Pose) -> Option<Aabb> {
+    cloud.transformed(pose).bounding_box()
+}
+
+/// Whether two boxes touch or overlap.
+pub(super) fn overlaps(a: &Aabb, b: &Aabb) -> bool {
+    (0..3).all(|i| a.min[i] <= b.max[i] && b.min[i] <= a.max[i])
+}
+
+impl<'a> State<'a> {
+    /// An empty map (nothing placed) for `scans`, its search pyramid sized by the frame
+    /// scan `params.first` ([`levels_from_extent`]).
+    pub(super) fn new(
+        scans: &'a [ScanInput],
+        params: &'a MapParams,
+        team: &'a TeamLinks,
+    ) -> Result<State<'a>> {
+        let res = params.register.search.resolution;
+        let levels = levels_from_extent(&scans[params.first], params);
+        let clouds = scans
+            .iter()
+            .map(|s| match params.register_band {
+                Some((lo, hi)) => Cow::Owned(s.cloud.z_band(lo, hi)),
+                None => Cow::Borrowed(&s.cloud),
+            })
+            .collect();
+        Ok(State {
+            scans,
+            clouds,
+            params,
+            team,
+            target: SearchTarget::from_scans(&[], res, levels)?,
+            refine_map: PointCloud::new(),
+            poses: vec![None; scans.len()],
+            registrations: 0,
+            map_box: None,
+        })
+    }
+
+    /// The odometry prediction of scan `s` from the placed scan of its frame fewest scans
+    /// away in the input (input order is capture order: odometry drifts with every move,
+    /// so the scan nearest in position may be many moves and tens of degrees of drift
+    /// away), and the odometry path length between the two.
+    pub(super) fn predict(&self, s: usize) -> Option<(Pose, f64)> {
+        let odo_s = self.scans[s].odometry?;
+        let p = self.predicts_from(s)?;
+        let pose_p = self.poses[p].expect("placed");
+        let odo_p = self.scans[p].odometry.expect("filtered");
+        let motion = odo_p.inverse() * odo_s;
+        Some((pose_p * motion, self.path_length(p, s)))
+    }
+
+    /// The placed scan [`State::predict`] predicts scan `s` from.
+    pub(super) fn predicts_from(&self, s: usize) -> Option<usize> {
+        self.scans[s].odometry?;
+        self.poses
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| p.is_some() && self.team.frame[*i] == self.team.frame[s])
+            .filter(|(i, _)| self.scans[*i].odometry.is_some())
+            .map(|(i, _)| i)
+            .min_by_key(|&i| (i.abs_diff(s), i))
+    }
+
+    /// The odometry path length between scans `a` and `b` of one frame: the moves between
+    /// the frame's scans with odometry, in input order.
+    pub(super) fn path_length(&self, a: usize, b: usize) -> f64 {
+        let (lo, hi) = (a.min(b), a.max(b));
+        let frame = self.team.frame[a];
+        let mut last: Option<Pose> = None;
+        let mut length = 0.0;
+        for i in lo..=hi {
+            if self.team.frame[i] != frame {
+                continue;
+            }
+            if let Some(odo) = self.scans[i].odometry {
+                if let Some(prev) = last {
+                    length += (odo.translation() - prev.translation()).norm();
+                }
+                last = Some(odo);
+            }
+        }
+        length
+    }
+
+    /// How far a match may be from an odometry prediction made over `distance` metres.
+    pub(super) fn odometry_tolerance(&self, distance: f64) -> f64 {
+        self.params.odometry_tolerance.max(0.25 * distance)
+    }
+
+    /// The overlap fraction of scan `s` at `pose` with the map as it is now (finest level):
+    /// a cheap update of a cached result's score after the map grew.
+    pub(super) fn overlap_fraction_at(&self, list: &OccupancyList, pose: &Pose) -> Result<f64> {
+        let n = list.len().max(1) as f64;
+        Ok(self.target.pyramid().base().overlap(list, pose)? as f64 / n)
+    }
+
+    /// How near scan `s` probably is to the placed scans, smaller first: with odometry,
+    /// `(false, metres)` from its predicted position to the nearest placed scan; without,
+    /// `(true, index gap)` to the nearest placed scan in the input (usually capture order).
+    pub(super) fn nearness(&self, s: usize) -> (bool, f64) {
+        let placed = self
+            .poses
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.map(|p| (i, p)));
+        match self.predict(s) {
+            Some((prior, _)) => (
+                false,
+                placed
+                    .map(|(_, p)| (p.translation() - prior.translation()).norm())
+                    .fold(f64::INFINITY, f64::min),
+            ),
+            None => (
+                true,
+                placed
+                    .map(|(i, _)| i.abs_diff(s) as f64)
+                    .fold(f64::INFINITY, f64::min),
+            ),
+        }
+    }
+
+    /// Whether odometry puts scan `s` clearly outside the map so far (its predicted
+    /// footprint, widened by every window and tolerance, misses the map's box): no search
+    /// can succeed yet, so the batch mapper does not spend one.
+    pub(super) fn far_from_map(&self, s: usize) -> bool {
+        if self.unlinked(s) {
+            return true;
+        }
+        let (Some((prior, distance)), Some(map)) = (self.predict(s), self.map_box) else {
+            return false;
+        };
+        let Some(fp) = footprint(&self.clouds[s], &prior) else {
+            return false;
+        };
+        let margin = (4.0 * self.params.odometry_window.0).max(self.odometry_tolerance(distance));
+        let widened = Aabb::new(
+            fp.min - nalgebra::Vector3::repeat(margin),
+            fp.max + nalgebra::Vector3::repeat(margin),
+        );
+        !overlaps(&widened, &map)
+    }
+
+    /// Adds scan `s` at `pose` to the map: its footprint to the map box, its registration
+    /// cloud to the search target, its whole cloud to the refinement points.
+    pub(super) fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
+        let cloud = &self.clouds[s];
+        if let Some(fp) = footprint(cloud, &pose) {
+            self.map_box = Some(self.map_box.map_or(fp, |b| b.union(&fp)));
+        }
+        self.target.add_scan(cloud, &pose)?;
+        // ICP refines against the whole scans (the floor fixes the height a band leaves free).
+        self.refine_map
+            .extend_from(&self.scans[s].cloud.transformed(&pose));
+        self.refine_map = self
+            .refine_map
+            .voxel_downsample(self.params.refine_map_voxel)?;
+        self.poses[s] = Some(pose);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A robot drives a 5 m square and comes back near its start: the last scan is 0.5 m
+    /// from the first by odometry but four moves from it, one move from the fourth.
+    #[test]
+    fn odometry_predicts_from_the_fewest_moves_not_the_nearest_position() {
+        let corners = [(0.0, 0.0), (5.0, 0.0), (5.0, 5.0), (0.0, 5.0), (0.3, 0.4)];
+        let scans: Vec<ScanInput> = corners
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, y))| ScanInput {
+                name: format!("s{i}"),
+                cloud: PointCloud::new(),
+                odometry: Some(Pose::from_xyz_ypr(x, y, 0.0, 0.0, 0.0, 0.0)),
+            })
+            .collect();
+        let params = MapParams::default();
+        let team = TeamLinks::none(scans.len());
+        let mut state = State {
+            scans: &scans,
+            clouds: scans.iter().map(|s| Cow::Borrowed(&s.cloud)).collect(),
+            params: &params,
+            team: &team,
+            target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
+            refine_map: PointCloud::new(),
+            poses: vec![None; scans.len()],
+            registrations: 0,
+            map_box: None,
+        };
+        state.poses[0] = Some(Pose::identity());
+        state.poses[3] = Some(Pose::from_xyz_ypr(0.2, 5.1, 0.0, 0.0, 0.0, 0.0));
+        assert_eq!(state.predicts_from(4), Some(3));
+        let (predicted, path) = state.predict(4).unwrap();
+        // From scan 3's placed pose by the one move in between (5.0 m, 4.6 m of it in y).
+        assert!((predicted.translation() - nalgebra::Vector3::new(0.5, 0.5, 0.0)).norm() < 1e-9);
+        assert!((path - (0.3f64.hypot(4.6))).abs() < 1e-9);
+        // The path length counts every move between two scans, not their distance.
+        assert!((state.path_length(0, 4) - (5.0 + 5.0 + 5.0 + 0.3f64.hypot(4.6))).abs() < 1e-9);
+    }
+}
