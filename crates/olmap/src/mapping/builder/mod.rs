@@ -195,21 +195,21 @@ fn placed_record(
     }
 }
 
-/// The number of search pyramid levels for a map framed by scan `first`: the rule of
-/// [`crate::align::SearchParams::levels_for`] applied to twice the frame scan's extent and
+/// The number of search pyramid levels for a map framed by scan `first`: the level rule
+/// [`crate::align::SearchParams::levels_for_source`] applied to twice the frame scan's extent and
 /// its largest range (the parameter's maximum range when the scan has none).
 fn levels_from_extent(first: &ScanInput, params: &MapParams) -> usize {
     let extent = first
         .cloud
         .bounding_box()
         .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
-    let range = first
-        .cloud
-        .stats()
-        .range
-        .map_or(params.register.search.max_range, |r| r.max);
-    params.register.search.levels_for(extent * 2.0, range)
+    let search = &params.register.search;
+    search.levels_for_source(search.resolution, extent * MAP_EXTENT_FACTOR, &first.cloud)
 }
+
+/// How far the map is expected to grow beyond its first scan: the search pyramid is sized
+/// for a target this many times the first scan's bounding box.
+const MAP_EXTENT_FACTOR: f64 = 2.0;
 
 /// Builds a map from scans: places them (batch or sequential, see [`MapMode`]), then fuses
 /// the placed scans by ray tracing into one occupancy list (with optional position buckets
