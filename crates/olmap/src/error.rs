@@ -4,6 +4,19 @@
 //! offset and what was expected there. Parsers work on streams without a path and return a
 //! [`ParseError`]; the path-level functions in [`crate::io`] wrap it into [`Error::Read`]
 //! together with the path and the format.
+//!
+//! Which variant says what, so that a caller can act on it:
+//!
+//! | variant | meaning | returned by, for example |
+//! |---|---|---|
+//! | [`Error::Io`], [`Error::IsDirectory`] | the file system refused | every reader and writer |
+//! | [`Error::UnknownFormat`], [`Error::Read`] | a file is not what it claims (path, format, line) | [`crate::io::read_cloud`], [`crate::occupancy::read_map`], [`crate::io::read_poses`] |
+//! | [`Error::Write`] | a write failed; the target is untouched | [`crate::file::write_atomic`] and every writer |
+//! | [`Error::EmptyInput`] | nothing to work on: wait for data or pick another input | registration with an empty target or no source point in range, [`crate::mapping::build_map`] without scans, [`crate::team::map_team`] on an empty store, [`crate::io::scan_files`] finding no scan |
+//! | [`Error::TooLarge`] | over a limit olmap enforces: ask for less | the exact search's bound grids, 2D and navigation grids beyond their cell limits |
+//! | [`Error::Unsupported`] | a valid request olmap does not do | reserved for format variants and mode combinations |
+//! | [`Error::NotFound`] | a name is not where it was looked up | [`crate::mapping::odometry_for`] (a scan without an odometry pose), [`crate::mapping::run_map_job`] (no scan of the first scan's name) |
+//! | [`Error::InvalidArgument`] | a bad parameter value or a contradiction between parameters | parameter checks everywhere |
 
 use std::fmt;
 use std::path::PathBuf;

@@ -76,9 +76,10 @@ fn check_resolution(resolution: f64) -> Result<()> {
 }
 
 fn too_big(width: i64, height: i64) -> Error {
-    Error::InvalidArgument(format!(
-        "a {width} x {height} cell grid exceeds the limit of {MAX_CELLS} cells"
-    ))
+    Error::TooLarge {
+        what: format!("a {width} x {height} cell grid"),
+        limit: format!("{MAX_CELLS} cells"),
+    }
 }
 
 impl OccupancyGrid2d {

@@ -118,9 +118,10 @@ pub fn navigation_grid(
     let (lo, hi) = ((lo.0 - m, lo.1 - m), (hi.0 + m, hi.1 + m));
     let (w, h) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
     if w.checked_mul(h).is_none_or(|n| n > MAX_NAV_CELLS) {
-        return Err(Error::InvalidArgument(format!(
-            "a {w} x {h} navigation grid exceeds the limit of {MAX_NAV_CELLS} cells; use a coarser resolution"
-        )));
+        return Err(Error::TooLarge {
+            what: format!("a {w} x {h} navigation grid"),
+            limit: format!("{MAX_NAV_CELLS} cells; use a coarser resolution"),
+        });
     }
     let mut grid = TrinaryGrid::unknown(res, [lo.0 as f64 * res, lo.1 as f64 * res, 0.0], w, h);
     let index = |(i, j): (i64, i64)| -> Option<usize> {

@@ -141,7 +141,9 @@ pub fn map_team(
 ) -> Result<TeamMap> {
     let scans: Vec<&StoredScan> = store.iter().collect();
     if scans.is_empty() {
-        return Err(Error::InvalidArgument("the scan store is empty".into()));
+        return Err(Error::EmptyInput {
+            what: "the scan store".into(),
+        });
     }
     let keys: Vec<(u32, u32)> = scans.iter().map(|s| (s.robot, s.seq)).collect();
     let robots = store.robots();

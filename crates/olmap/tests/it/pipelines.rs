@@ -268,3 +268,45 @@ fn team_pipeline_writes_what_its_report_says() {
         .map;
     assert_eq!(map.len(), r.voxels);
 }
+
+/// The errors a caller acts on are told apart by variant, not by message.
+#[test]
+fn typed_errors_say_what_a_caller_can_do() {
+    use olmap::align::{register, RegisterParams};
+    use olmap::grid2d::OccupancyGrid2d;
+    use olmap::team::{map_team, ScanStore};
+
+    let room = olmap::fixtures::furnished_room(0.1);
+    let scan = olmap::fixtures::scan_of(&room, &pose(3.0, 3.0, 0.0), 12.0);
+    let nothing = PointCloud::from_points(Vec::new());
+    // Nothing to align onto, or nothing of the scan in range: empty inputs.
+    assert!(matches!(
+        register(&scan, &nothing, &RegisterParams::default()),
+        Err(Error::EmptyInput { .. })
+    ));
+    // Every point 100 m from the sensor (at the origin), beyond the 30 m range.
+    let far = PointCloud::from_points(
+        (0..50)
+            .map(|i| nalgebra::Point3::new(100.0, i as f32 * 0.1, 1.0))
+            .collect(),
+    );
+    assert!(matches!(
+        register(&far, &scan, &RegisterParams::default()),
+        Err(Error::EmptyInput { .. })
+    ));
+    assert!(matches!(
+        map_team(&ScanStore::new(), &TeamParams::default(), |_, _| {}),
+        Err(Error::EmptyInput { .. })
+    ));
+    // A grid beyond the cell limit: too large, and the message names the limit.
+    let err = OccupancyGrid2d::fixed(0.05, (0.0, 0.0), 1 << 20, 1 << 20).unwrap_err();
+    assert!(
+        matches!(&err, Error::TooLarge { limit, .. } if limit.contains("cells")),
+        "{err}"
+    );
+    // A bad parameter stays an invalid argument.
+    assert!(matches!(
+        OccupancyGrid2d::new(-1.0),
+        Err(Error::InvalidArgument(_))
+    ));
+}

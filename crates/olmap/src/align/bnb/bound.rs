@@ -142,11 +142,9 @@ pub(super) fn build_levels(
     occupied: &OccupancyList,
     free_map: Option<&DenseGrid>,
 ) -> Result<Vec<Level>> {
-    let too_big = || {
-        Error::InvalidArgument(
-            "the exact search's bound grids do not fit in memory; use the multi-resolution search"
-                .into(),
-        )
+    let too_big = || Error::TooLarge {
+        what: "the exact search's bound grids".into(),
+        limit: format!("{GRID_BUDGET_BYTES} bytes; use the multi-resolution search"),
     };
     let align = shapes.iter().flat_map(|s| s.shift).max().unwrap_or(0);
     let (fine_occ, fine_free) = fine_grids(occupied, free_map, align).ok_or_else(too_big)?;

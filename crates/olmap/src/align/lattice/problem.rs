@@ -98,16 +98,20 @@ pub(crate) fn prepare<'a>(
     let res = target.resolution();
     let scan_cloud = source.range_band(0.0, params.max_range);
     if scan_cloud.is_empty() {
-        return Err(Error::InvalidArgument(format!(
-            "the source has no point within {} m of its sensor",
-            params.max_range
-        )));
+        return Err(Error::EmptyInput {
+            what: format!(
+                "the source has no point within {} m of its sensor",
+                params.max_range
+            ),
+        });
     }
     let bbox = pyramid
         .base()
         .stats()
         .bbox
-        .ok_or_else(|| Error::InvalidArgument("the target is empty".into()))?;
+        .ok_or_else(|| Error::EmptyInput {
+            what: "the target".into(),
+        })?;
     let base_scan = OccupancyList::from_cloud(&scan_cloud, res)?;
     let mut scan = Vec::with_capacity(pyramid.levels());
     for level in 0..pyramid.levels() {

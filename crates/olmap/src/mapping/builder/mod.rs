@@ -289,7 +289,9 @@ pub fn build_map_linked(
 /// the scans, a frame scan index out of range.
 fn check_inputs(scans: &[ScanInput], params: &MapParams, team: &TeamLinks) -> Result<()> {
     if scans.is_empty() {
-        return Err(Error::InvalidArgument("no scans to map".into()));
+        return Err(Error::EmptyInput {
+            what: "the scans to map".into(),
+        });
     }
     if team.frame.len() != scans.len()
         || team.links.len() != scans.len()
