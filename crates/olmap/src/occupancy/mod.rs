@@ -23,6 +23,7 @@ mod packed;
 mod pyramid;
 mod query;
 mod raytrace;
+mod report;
 mod table;
 
 pub use buckets::PositionBuckets;
@@ -33,3 +34,4 @@ pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
 pub use query::RayHit;
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};
+pub use report::{describe_file, FileError, FileInfo, MapInfo, OctreeReport, VoxelizeReport};
