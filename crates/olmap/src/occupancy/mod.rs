@@ -22,6 +22,7 @@ mod overlap;
 mod packed;
 mod pyramid;
 mod query;
+mod query_report;
 mod raytrace;
 mod report;
 mod table;
@@ -33,5 +34,8 @@ pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
 pub use query::RayHit;
+pub use query_report::{
+    AtReport, QueryReport, RadiusReport, RayHitReport, RayMissReport, SegmentReport, VoxelReport,
+};
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};
 pub use report::{describe_file, FileError, FileInfo, MapInfo, OctreeReport, VoxelizeReport};
