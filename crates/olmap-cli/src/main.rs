@@ -6,7 +6,6 @@
 
 mod args;
 mod commands;
-mod report;
 
 use std::process::ExitCode;
 

@@ -37,6 +37,8 @@
 
 pub mod align;
 pub mod beacon;
+#[cfg(feature = "test-support")]
+pub mod bench;
 pub mod cloud;
 pub mod error;
 pub mod file;

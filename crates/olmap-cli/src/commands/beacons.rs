@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use olmap::beacon::{
-    detect_circles_lsq, detect_circles_reflective, detect_circles_rwht, Detection, LsqParams,
-    ReflectiveParams, RwhtParams,
+    detect_circles_lsq, detect_circles_reflective, detect_circles_rwht, BeaconsReport, Detection,
+    LsqParams, ReflectiveParams, RwhtParams,
 };
 use olmap::cloud::LaserScan;
 
@@ -92,27 +92,7 @@ pub fn run(args: &BeaconsArgs) -> anyhow::Result<ExitCode> {
     };
     let shown = args.scan.display().to_string();
     if args.json {
-        let list: Vec<serde_json::Value> = found
-            .iter()
-            .map(|d| {
-                serde_json::json!({
-                    "x": d.center.x,
-                    "y": d.center.y,
-                    "range": d.range(),
-                    "bearing_deg": d.bearing().to_degrees(),
-                    "rms": d.rms,
-                    "returns": d.returns,
-                    "confidence": d.confidence,
-                })
-            })
-            .collect();
-        let v = serde_json::json!({
-            "path": shown,
-            "method": args.method.name(),
-            "radius": args.radius,
-            "beams": scan.len(),
-            "detections": list,
-        });
+        let v = BeaconsReport::new(&shown, args.method.name(), args.radius, scan.len(), &found);
         println!(
             "{}",
             serde_json::to_string_pretty(&v).context("writing JSON")?

@@ -8,7 +8,9 @@ use anyhow::bail;
 use clap::{Args, ValueEnum};
 use nalgebra::Point3;
 use olmap::geometry::Aabb;
-use olmap::io::{self, CloudFormat, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions};
+use olmap::io::{
+    self, CloudFormat, ConvertJob, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions,
+};
 
 use super::info::parse_format;
 use crate::args::{parse_numbers, parse_pose};
@@ -106,70 +108,41 @@ pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
             }
         }
     }
-    let read = ReadOptions {
-        format: a.in_format,
-        uos_valid_only: a.threedtk_valid,
-    };
-    let loaded = io::read_cloud_with(&a.input, &read)?;
-    let read_points = loaded.cloud.len();
-    let mut cloud = loaded.cloud;
-    if a.min_range.is_some() || a.max_range.is_some() {
-        cloud = cloud.range_band(
-            a.min_range.unwrap_or(0.0),
-            a.max_range.unwrap_or(f64::INFINITY),
-        );
-    }
-    if let Some(t) = &transform {
-        cloud = cloud.transformed(t);
-    }
-    if let Some(b) = &crop {
-        cloud = cloud.crop_box(b);
-    }
-    if a.z_min.is_some() || a.z_max.is_some() {
-        cloud = cloud.z_band(
-            a.z_min.unwrap_or(f64::NEG_INFINITY),
-            a.z_max.unwrap_or(f64::INFINITY),
-        );
-    }
-    if let Some(v) = a.voxel {
-        cloud = cloud.voxel_downsample(v)?;
-    }
-    let write = WriteOptions {
-        format: a.out_format,
-        pcd_encoding: match a.pcd_encoding {
-            PcdEncodingArg::Ascii => PcdEncoding::Ascii,
-            PcdEncodingArg::Binary => PcdEncoding::Binary,
-            PcdEncodingArg::BinaryCompressed => PcdEncoding::BinaryCompressed,
+    let job = ConvertJob {
+        input: a.input.clone(),
+        output: a.output.clone(),
+        read: ReadOptions {
+            format: a.in_format,
+            uos_valid_only: a.threedtk_valid,
         },
-        ply_encoding: if a.ply_ascii {
-            PlyEncoding::Ascii
-        } else {
-            PlyEncoding::BinaryLittleEndian
+        write: WriteOptions {
+            format: a.out_format,
+            pcd_encoding: match a.pcd_encoding {
+                PcdEncodingArg::Ascii => PcdEncoding::Ascii,
+                PcdEncodingArg::Binary => PcdEncoding::Binary,
+                PcdEncodingArg::BinaryCompressed => PcdEncoding::BinaryCompressed,
+            },
+            ply_encoding: if a.ply_ascii {
+                PlyEncoding::Ascii
+            } else {
+                PlyEncoding::BinaryLittleEndian
+            },
         },
+        min_range: a.min_range,
+        max_range: a.max_range,
+        transform,
+        crop,
+        z_min: a.z_min,
+        z_max: a.z_max,
+        voxel: a.voxel,
     };
-    io::write_cloud(&a.output, &cloud, &write)?;
-    let seconds = start.elapsed().as_secs_f64();
+    let r = io::convert_cloud_file(&job, start)?;
     if a.json {
-        let v = serde_json::json!({
-            "input": a.input.display().to_string(),
-            "input_format": loaded.report.format.name(),
-            "output": a.output.display().to_string(),
-            "points_read": read_points,
-            "points_written": cloud.len(),
-            "dropped_non_finite": loaded.report.dropped_non_finite,
-            "dropped_invalid": loaded.report.dropped_invalid,
-            "seconds": seconds,
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
             "{} ({}, {} points) -> {} ({} points) in {:.2} s",
-            a.input.display(),
-            loaded.report.format,
-            read_points,
-            a.output.display(),
-            cloud.len(),
-            seconds
+            r.input, r.input_format, r.points_read, r.output, r.points_written, r.seconds
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -9,7 +9,10 @@ use anyhow::{bail, Context};
 use clap::Args;
 use olmap::cloud::LaserScan;
 use olmap::geometry::PoseList;
-use olmap::grid2d::{write_ros_map, OccupancyGrid2d, SensorModel2d, Thresholds};
+use olmap::grid2d::{
+    write_ros_map, CellsReport, ExtentReport, Grid2dReport, OccupancyGrid2d, SensorModel2d,
+    Thresholds,
+};
 use olmap::occupancy::PositionBuckets;
 
 /// Arguments of `olmap grid2d`.
@@ -114,23 +117,26 @@ pub fn run(a: &Grid2dArgs) -> anyhow::Result<ExitCode> {
     let c = map.counts();
     let ((x0, y0), (x1, y1)) = grid.extent();
     if a.json {
-        let v = serde_json::json!({
-            "output": a.output.display().to_string(),
-            "yaml": yaml.display().to_string(),
-            "scans": a.scans.len(),
-            "scans_integrated": integrated,
-            "scans_skipped_by_buckets": skipped,
-            "beams": beams,
-            "hits": hits,
-            "cells_traversed": cells_traversed,
-            "resolution": a.resolution,
-            "width": map.width,
-            "height": map.height,
-            "origin": map.origin,
-            "extent": { "min": [x0, y0], "max": [x1, y1] },
-            "cells": { "free": c.free, "occupied": c.occupied, "unknown": c.unknown },
-            "seconds": seconds,
-        });
+        let v = Grid2dReport {
+            output: a.output.display().to_string(),
+            yaml: yaml.display().to_string(),
+            scans: a.scans.len(),
+            scans_integrated: integrated,
+            scans_skipped_by_buckets: skipped,
+            beams,
+            hits,
+            cells_traversed,
+            resolution: a.resolution,
+            width: map.width,
+            height: map.height,
+            origin: map.origin,
+            extent: ExtentReport {
+                min: [x0, y0],
+                max: [x1, y1],
+            },
+            cells: CellsReport::from(c),
+            seconds,
+        };
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

@@ -1,15 +1,12 @@
 //! `olmap info`: describe point-cloud files.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
-use olmap::io::{self, CloudFormat, ReadOptions};
-
-use olmap::occupancy::{self, MapFormat};
-use serde_json::Value;
-
-use crate::report::{cloud_json, cloud_text, map_json, map_text};
+use olmap::cloud::BoxReport;
+use olmap::io::{CloudFormat, CloudInfo, ReadOptions};
+use olmap::occupancy::{describe_file, FileInfo, MapInfo};
 
 /// Arguments of `olmap info`.
 #[derive(Args)]
@@ -37,44 +34,6 @@ pub fn parse_format(s: &str) -> Result<CloudFormat, String> {
         .ok_or_else(|| format!("unknown format '{s}'; known: pcd, ply, xyz, 3d, csv, kitti, graph"))
 }
 
-/// JSON and text descriptions of a map file.
-fn describe_map(path: &Path, shown: &str) -> olmap::Result<(Value, String)> {
-    let loaded = occupancy::read_map(path)?;
-    let stats = loaded.map.stats();
-    let name = loaded.format.name();
-    let mut v = map_json(shown, name, &stats);
-    let mut text = map_text(shown, name, &stats);
-    if let Some(bt) = &loaded.bt {
-        v["octree"] = serde_json::json!({
-            "nodes": bt.nodes,
-            "occupied_leaves": bt.occupied_leaves,
-            "free_leaves": bt.free_leaves,
-            "occupied_leaves_by_depth": bt.occupied_leaves_by_depth,
-        });
-        text.push_str(&format!(
-            "  {:<14}{} nodes, {} occupied and {} free leaves\n",
-            "octree", bt.nodes, bt.occupied_leaves, bt.free_leaves
-        ));
-    }
-    Ok((v, text))
-}
-
-/// JSON and text descriptions of a point-cloud file.
-fn describe_cloud(
-    path: &Path,
-    shown: &str,
-    options: &ReadOptions,
-) -> olmap::Result<(Value, String)> {
-    let loaded = io::read_cloud_with(path, options)?;
-    let stats = loaded.cloud.stats();
-    let o = loaded.cloud.origin();
-    let origin = [o.x, o.y, o.z];
-    Ok((
-        cloud_json(shown, &stats, &loaded.report, origin),
-        cloud_text(shown, &stats, &loaded.report, origin),
-    ))
-}
-
 /// Runs the command.
 pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let options = ReadOptions {
@@ -85,22 +44,20 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let mut failed = false;
     for path in &args.files {
         let shown = path.display().to_string();
-        let described = if MapFormat::from_path(path).is_some() {
-            describe_map(path, &shown)
-        } else {
-            describe_cloud(path, &shown, &options)
-        };
-        match described {
-            Ok((v, _)) if args.json => json.push(v),
-            Ok((_, text)) => print!("{text}"),
-            Err(e) => {
+        let info = describe_file(path, &shown, &options);
+        match &info {
+            FileInfo::Error(e) => {
                 failed = true;
-                if args.json {
-                    json.push(serde_json::json!({ "path": shown, "error": e.to_string() }));
-                } else {
-                    eprintln!("error: {e}");
+                if !args.json {
+                    eprintln!("error: {}", e.error);
                 }
             }
+            FileInfo::Cloud(c) if !args.json => print!("{}", cloud_text(c)),
+            FileInfo::Map(m) if !args.json => print!("{}", map_text(m)),
+            _ => {}
+        }
+        if args.json {
+            json.push(info);
         }
     }
     if args.json {
@@ -111,4 +68,121 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// The two text lines of a bounding box.
+fn bbox_lines(b: &BoxReport, line: &mut impl FnMut(&str, String)) {
+    line(
+        "bbox min",
+        format!("({:.3}, {:.3}, {:.3}) m", b.min[0], b.min[1], b.min[2]),
+    );
+    line(
+        "bbox max",
+        format!("({:.3}, {:.3}, {:.3}) m", b.max[0], b.max[1], b.max[2]),
+    );
+}
+
+/// The human-readable description of a read cloud.
+fn cloud_text(c: &CloudInfo) -> String {
+    let mut s = String::new();
+    let mut line = |k: &str, v: String| s.push_str(&format!("  {k:<14}{v}\n"));
+    let mut fmt = c.format.clone();
+    if !c.encoding.is_empty() {
+        fmt.push_str(&format!(" ({})", c.encoding));
+    }
+    if let Some(z) = &c.compression {
+        fmt.push_str(&format!(", {z}-compressed"));
+    }
+    line("format", fmt);
+    line("points", format!("{} of {} records", c.points, c.records));
+    if c.dropped_non_finite > 0 {
+        line(
+            "dropped",
+            format!("{} with NaN/Inf coordinates", c.dropped_non_finite),
+        );
+    }
+    if c.dropped_invalid > 0 {
+        line(
+            "filtered",
+            format!("{} outside the valid range", c.dropped_invalid),
+        );
+    }
+    if c.header_lines_skipped > 0 {
+        line(
+            "header lines",
+            format!("{} skipped", c.header_lines_skipped),
+        );
+    }
+    if let Some(o) = c.organized {
+        line("organised", format!("{} x {}", o.width, o.height));
+    }
+    line("fields", c.fields.join(" "));
+    let origin = c.origin;
+    line(
+        "origin",
+        format!("({:.3}, {:.3}, {:.3}) m", origin[0], origin[1], origin[2]),
+    );
+    if let Some(b) = &c.bbox {
+        bbox_lines(b, &mut line);
+        let e = b.extent();
+        line(
+            "extent",
+            format!("{:.3} x {:.3} x {:.3} m", e[0], e[1], e[2]),
+        );
+    }
+    if let Some(r) = c.range {
+        line(
+            "range",
+            format!(
+                "min {:.3}, median {:.3}, mean {:.3}, max {:.3} m",
+                r.min, r.median, r.mean, r.max
+            ),
+        );
+    }
+    if let Some([a, b]) = c.intensity_range {
+        // Intensities are single precision: shown as read (the widening is exact).
+        line("intensity", format!("{} .. {}", a as f32, b as f32));
+    }
+    let mut attrs = Vec::new();
+    if c.has_normals {
+        attrs.push("normals");
+    }
+    if c.has_colors {
+        attrs.push("colours");
+    }
+    if !attrs.is_empty() {
+        line("attributes", attrs.join(", "));
+    }
+    format!("{}\n{s}", c.path)
+}
+
+/// The human-readable description of a map file.
+fn map_text(m: &MapInfo) -> String {
+    let mut out = format!("{}\n", m.path);
+    let mut line = |k: &str, v: String| out.push_str(&format!("  {k:<14}{v}\n"));
+    line("format", m.format.clone());
+    line("resolution", format!("{} m", m.resolution));
+    line("voxels", m.voxels.to_string());
+    if let Some(b) = &m.bbox {
+        bbox_lines(b, &mut line);
+    }
+    line(
+        "counts",
+        format!("total {}, max {}", m.total_count, m.max_count),
+    );
+    line(
+        "memory",
+        format!(
+            "{} bytes ({:.1} per voxel)",
+            m.memory_bytes,
+            m.bytes_per_voxel()
+        ),
+    );
+    if let Some(bt) = &m.octree {
+        out.push_str(&format!(
+            "  {:<14}{} nodes, {} occupied and {} free leaves\n",
+            "octree", bt.nodes, bt.occupied_leaves, bt.free_leaves
+        ));
+    }
+    out
 }

@@ -4,9 +4,9 @@ use std::process::ExitCode;
 
 use clap::Args;
 use olmap::team::{
-    expected_position_error, mutual_from_scans, mutual_pose, MutualObservation, MutualParams,
+    mutual_from_scans, mutual_pose, observation_of_fix, MutualObservation, MutualParams,
+    MutualReport,
 };
-use serde_json::json;
 
 /// Arguments of `olmap mutual`: either the four measurements, or the two robots' 2D scans
 /// (CSV or JSON) taken at the same time, in which the retroreflective beacons are found.
@@ -66,16 +66,7 @@ pub fn run(m: &MutualArgs) -> anyhow::Result<ExitCode> {
                 ..Default::default()
             };
             let fix = mutual_from_scans(&sa, &sb, m.radius, m.offset, &detect, &params)?;
-            // The observation the fix came from, for the error bound: ranges from the
-            // separations' geometry are close enough (a ~ b ~ the distance).
-            let dist = (fix.x * fix.x + fix.y * fix.y).sqrt();
-            let o = MutualObservation {
-                a: dist,
-                alpha: 0.0,
-                b: dist,
-                beta: 0.0,
-                d: m.offset,
-            };
+            let o = observation_of_fix(&fix, m.offset);
             (fix, o)
         }
         None => {
@@ -92,22 +83,13 @@ pub fn run(m: &MutualArgs) -> anyhow::Result<ExitCode> {
             (mutual_pose(&o, &params)?, o)
         }
     };
-    let bound = expected_position_error(&o, m.range_error, m.beacon_width, 0.0)?;
+    let r = MutualReport::new(&fix, &o, m.range_error, m.beacon_width)?;
     if m.json {
-        let v = json!({
-            "x_m": fix.x, "y_m": fix.y, "heading_deg": fix.heading.to_degrees(),
-            "s1_m": fix.s1, "s2_m": fix.s2, "expected_error_m": bound,
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
             "B in A's frame: x {:.4} m, y {:.4} m, heading {:.3} deg (separations {:.4} / {:.4} m; expected position error <= {:.3} m)",
-            fix.x,
-            fix.y,
-            fix.heading.to_degrees(),
-            fix.s1,
-            fix.s2,
-            bound
+            r.x_m, r.y_m, r.heading_deg, r.s1_m, r.s2_m, r.expected_error_m
         );
     }
     Ok(ExitCode::SUCCESS)

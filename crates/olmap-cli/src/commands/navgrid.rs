@@ -7,8 +7,7 @@ use std::process::ExitCode;
 use anyhow::bail;
 use clap::Args;
 use olmap::geometry::{Pose, PoseList};
-use olmap::grid2d::{navigation_grid, write_ros_map, NavGridParams};
-use serde_json::json;
+use olmap::grid2d::{navigation_grid, write_ros_map, NavGridParams, NavgridReport};
 
 use super::render::{parse_band, read};
 
@@ -69,28 +68,26 @@ pub fn run(a: &NavgridArgs) -> anyhow::Result<ExitCode> {
         );
     }
     let yaml = write_ros_map(&a.output, &grid)?;
-    let c = grid.counts();
+    let r = NavgridReport::new(
+        &grid,
+        poses.len(),
+        &a.output.display().to_string(),
+        &yaml.display().to_string(),
+    );
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&json!({
-                "pgm": a.output.display().to_string(), "yaml": yaml.display().to_string(),
-                "width": grid.width, "height": grid.height, "resolution_m": grid.resolution,
-                "origin": grid.origin, "poses": poses.len(),
-                "free": c.free, "occupied": c.occupied, "unknown": c.unknown}))?
-        );
+        println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
             "{} x {} cells at {} m from {} poses: {} free, {} occupied, {} unknown -> {} + {}",
-            grid.width,
-            grid.height,
-            grid.resolution,
-            poses.len(),
-            c.free,
-            c.occupied,
-            c.unknown,
-            a.output.display(),
-            yaml.display()
+            r.width,
+            r.height,
+            r.resolution_m,
+            r.poses,
+            r.free,
+            r.occupied,
+            r.unknown,
+            r.pgm,
+            r.yaml
         );
     }
     Ok(ExitCode::SUCCESS)

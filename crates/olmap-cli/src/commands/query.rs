@@ -5,8 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::bail;
 use clap::{ArgGroup, Args};
-use nalgebra::{Point3, Vector3};
-use serde_json::json;
+use olmap::occupancy::QueryReport;
 
 use super::render::read;
 use crate::args::parse_numbers;
@@ -44,93 +43,66 @@ pub struct QueryArgs {
 /// Runs `olmap query`.
 pub fn run(a: &QueryArgs) -> anyhow::Result<ExitCode> {
     let map = read(&a.map)?;
-    let r = map.resolution();
-    let key_json = |k: olmap::geometry::VoxelKey| {
-        let c = map.center(k);
-        json!({"key": [k.x, k.y, k.z], "center": [c.x, c.y, c.z], "count": map.count(k)})
-    };
-    let (value, text) = if let Some(s) = &a.at {
-        let [x, y, z] = parse_numbers::<3>(s, "--at")?;
-        let p = Point3::new(x, y, z);
-        let count = map.count_at(&p);
-        let occupied = count >= a.min_count.max(1);
-        (
-            json!({"query": "at", "point": [x, y, z], "occupied": occupied, "count": count}),
-            format!(
-                "({x}, {y}, {z}): {} (count {count})",
-                if occupied {
-                    "occupied"
-                } else {
-                    "free or unknown"
-                }
-            ),
-        )
+    let report = if let Some(s) = &a.at {
+        QueryReport::at(&map, parse_numbers::<3>(s, "--at")?, a.min_count)
     } else if let Some(s) = &a.ray {
         let [x, y, z, dx, dy, dz] = parse_numbers::<6>(s, "--ray")?;
-        let hit = map.cast_ray(
-            &Point3::new(x, y, z),
-            &Vector3::new(dx, dy, dz),
-            a.max_range,
-            a.min_count,
-        )?;
-        match hit {
-            Some(h) => (
-                json!({"query": "ray", "hit": true, "distance_m": h.distance,
-                       "point": [h.point.x, h.point.y, h.point.z], "voxel": key_json(h.key)}),
-                format!(
-                    "hit at {:.3} m: voxel {:?} centred at {:?} (count {}), accurate to one voxel ({r} m)",
-                    h.distance, [h.key.x, h.key.y, h.key.z], map.center(h.key).coords.as_slice(), h.count
-                ),
-            ),
-            None => (
-                json!({"query": "ray", "hit": false, "max_range_m": a.max_range}),
-                format!("no occupied voxel within {} m", a.max_range),
-            ),
-        }
+        QueryReport::ray(&map, [x, y, z], [dx, dy, dz], a.max_range, a.min_count)?
     } else if let Some(s) = &a.radius {
         let [x, y, z, rad] = parse_numbers::<4>(s, "--radius")?;
-        let near: Vec<_> = map
-            .occupied_within(&Point3::new(x, y, z), rad)?
-            .into_iter()
-            .filter(|(_, c)| *c >= a.min_count.max(1))
-            .collect();
-        let mut text = format!(
-            "{} occupied voxels within {rad} m of ({x}, {y}, {z})",
-            near.len()
-        );
-        for (k, c) in near.iter().take(20) {
-            let p = map.center(*k);
-            text.push_str(&format!(
-                "\n  ({:.3}, {:.3}, {:.3}) count {c}",
-                p.x, p.y, p.z
-            ));
-        }
-        if near.len() > 20 {
-            text.push_str("\n  ...");
-        }
-        (
-            json!({"query": "radius", "center": [x, y, z], "radius_m": rad, "count": near.len(),
-                   "voxels": near.iter().map(|(k, _)| key_json(*k)).collect::<Vec<_>>()}),
-            text,
-        )
+        QueryReport::radius(&map, [x, y, z], rad, a.min_count)?
     } else if let Some(s) = &a.segment {
         let [x1, y1, z1, x2, y2, z2] = parse_numbers::<6>(s, "--segment")?;
-        let free = map.segment_is_free(
-            &Point3::new(x1, y1, z1),
-            &Point3::new(x2, y2, z2),
-            a.min_count,
-        )?;
-        (
-            json!({"query": "segment", "from": [x1, y1, z1], "to": [x2, y2, z2], "free": free}),
-            format!("segment {}", if free { "free" } else { "blocked" }),
-        )
+        QueryReport::segment(&map, [x1, y1, z1], [x2, y2, z2], a.min_count)?
     } else {
         bail!("give one of --at, --ray, --radius, --segment");
     };
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&value)?);
+        println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!("{text}");
+        println!("{}", text(&report, map.resolution()));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The text answer of a query of a map of resolution `r`.
+fn text(report: &QueryReport, r: f64) -> String {
+    match report {
+        QueryReport::At(q) => {
+            let [x, y, z] = q.point;
+            format!(
+                "({x}, {y}, {z}): {} (count {})",
+                if q.occupied {
+                    "occupied"
+                } else {
+                    "free or unknown"
+                },
+                q.count
+            )
+        }
+        QueryReport::RayHit(h) => format!(
+            "hit at {:.3} m: voxel {:?} centred at {:?} (count {}), accurate to one voxel ({r} m)",
+            h.distance_m, h.voxel.key, h.voxel.center, h.voxel.count
+        ),
+        QueryReport::RayMiss(m) => format!("no occupied voxel within {} m", m.max_range_m),
+        QueryReport::Radius(q) => {
+            let [x, y, z] = q.center;
+            let mut text = format!(
+                "{} occupied voxels within {} m of ({x}, {y}, {z})",
+                q.count, q.radius_m
+            );
+            for v in q.voxels.iter().take(20) {
+                let p = v.center;
+                text.push_str(&format!(
+                    "\n  ({:.3}, {:.3}, {:.3}) count {}",
+                    p[0], p[1], p[2], v.count
+                ));
+            }
+            if q.voxels.len() > 20 {
+                text.push_str("\n  ...");
+            }
+            text
+        }
+        QueryReport::Segment(q) => format!("segment {}", if q.free { "free" } else { "blocked" }),
+    }
 }

@@ -9,10 +9,9 @@ use nalgebra::Point3;
 use olmap::geometry::{Pose, PoseList};
 use olmap::occupancy::{self, OccupancyList};
 use olmap::render::{
-    overlap_surface, render_depth, render_top_view, write_png, Camera, OverlapSurfaceParams,
-    TopViewOptions,
+    overlap_surface, render_depth, render_top_view, write_png, Camera, DepthReport, OverlapReport,
+    OverlapSurfaceParams, RenderReport, TopViewOptions, TopViewReport,
 };
-use serde_json::json;
 
 use crate::args::parse_numbers;
 
@@ -125,6 +124,7 @@ pub(super) fn read(path: &PathBuf) -> anyhow::Result<OccupancyList> {
 /// Runs `olmap render`.
 pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
     let map = read(&a.map)?;
+    let shown = a.output.display().to_string();
     let summary = match a.view {
         ViewArg::Top => {
             let poses = match &a.poses {
@@ -155,10 +155,7 @@ pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
             };
             let view = render_top_view(&map, &options)?;
             write_png(&a.output, &view.image)?;
-            json!({"output": a.output.display().to_string(), "view": "top",
-                   "width": view.image.width(), "height": view.image.height(),
-                   "columns": view.columns, "x_min_m": view.x_min, "y_max_m": view.y_max,
-                   "pixel_m": view.pixel_size, "z_range_m": [view.z_range.0, view.z_range.1]})
+            RenderReport::Top(TopViewReport::new(&shown, &view))
         }
         ViewArg::Depth => {
             let from = a
@@ -198,10 +195,7 @@ pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
             };
             let depth = render_depth(&map, &pose, &camera, a.max_range, a.min_count)?;
             write_png(&a.output, &depth.to_image())?;
-            let (w, h) = camera.size();
-            json!({"output": a.output.display().to_string(), "view": "depth",
-                   "width": w, "height": h, "hits": depth.hits(),
-                   "centre_range_m": depth.range(w / 2, h / 2)})
+            RenderReport::Depth(DepthReport::new(&shown, &camera, &depth))
         }
         ViewArg::Overlap => {
             let scan_path = a
@@ -224,22 +218,24 @@ pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
             let surface = overlap_surface(&map.threshold(a.min_count), &scan, &centre, &params)?;
             let img = surface.to_image(4);
             write_png(&a.output, &img)?;
-            let (px, py, pyaw, best) = surface.peak();
-            json!({"output": a.output.display().to_string(), "view": "overlap",
-                   "width": img.width(), "height": img.height(), "samples_per_side": surface.n,
-                   "step_m": surface.step, "x0_m": surface.x0, "y0_m": surface.y0,
-                   "scan_voxels": scan.len(),
-                   "peak": {"x_m": px, "y_m": py, "yaw_deg": pyaw.to_degrees(), "overlap": best}})
+            RenderReport::Overlap(OverlapReport::new(
+                &shown,
+                img.width(),
+                img.height(),
+                &surface,
+                scan.len(),
+            ))
         }
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
+        let (width, height) = summary.size();
         println!(
             "{} view {} x {} -> {}",
-            summary["view"].as_str().unwrap_or(""),
-            summary["width"],
-            summary["height"],
+            summary.view(),
+            width,
+            height,
             a.output.display()
         );
     }

@@ -8,8 +8,9 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 use olmap::io::{self, WriteOptions};
-use olmap::scanner::{convert_log, repeatability, ConvertParams, MirrorLog, RepeatabilityParams};
-use serde_json::json;
+use olmap::scanner::{
+    convert_log, repeatability, ConvertParams, MirrorLog, RepeatabilityParams, ScannerConvertReport,
+};
 
 /// Arguments of `olmap scanner`.
 #[derive(Args)]
@@ -106,27 +107,14 @@ fn convert(a: &ConvertRawArgs) -> anyhow::Result<ExitCode> {
     let s = out.stats;
     let seconds = start.elapsed().as_secs_f64();
     if a.json {
-        let v = json!({
-            "input": a.input.display().to_string(),
-            "output": a.output.display().to_string(),
-            "mounting": log.header.mounting.name(),
-            "sweeps": s.sweeps,
-            "beams": s.beams,
-            "points": s.points,
-            "dropped": {
-                "no_return": s.no_return,
-                "outside_mirror": s.outside_mirror,
-                "edge_on": s.edge_on,
-                "blocked": s.blocked,
-                "beyond_max_range": s.beyond_max_range,
-                "below_min_range": s.below_min_range,
-                "outside_elevation": s.outside_elevation,
-                "mixed_pixels": s.mixed_pixels,
-            },
-            "trigger_mismatches": s.trigger_mismatches,
-            "within_sweep_correction": params.within_sweep_correction,
-            "seconds": seconds,
-        });
+        let v = ScannerConvertReport::new(
+            &a.input.display().to_string(),
+            &a.output.display().to_string(),
+            log.header.mounting.name(),
+            &s,
+            params.within_sweep_correction,
+            seconds,
+        );
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

@@ -5,12 +5,11 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Args, ValueEnum};
-use olmap::sim::write_dataset;
 use olmap::sim::{
     simulate, MirrorScanner, OdometryNoise, PlanarScanner, RobotModel, Scanner3d, SimConfig,
     SpinningLidar, WorldKind,
 };
-use serde_json::json;
+use olmap::sim::{write_dataset, SimulateReport};
 
 use crate::args::progress;
 
@@ -157,36 +156,19 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
     let sim_seconds = start.elapsed().as_secs_f64();
     write_dataset(&a.output, &data)?;
     let seconds = start.elapsed().as_secs_f64();
-    let points: usize = data
-        .robots
-        .iter()
-        .flat_map(|r| r.scans.iter().map(|s| s.len()))
-        .sum();
-    let mutual = data.sightings.iter().filter(|s| s.mutual).count();
-    let summary = json!({
-        "output": a.output.display().to_string(),
-        "world": world.name(),
-        "seed": a.seed,
-        "robots": a.robots,
-        "scans": total,
-        "points": points,
-        "sightings": data.sightings.len(),
-        "mutual_sightings": mutual,
-        "simulate_seconds": sim_seconds,
-        "seconds": seconds,
-    });
+    let r = SimulateReport::new(&a.output.display().to_string(), &data, sim_seconds, seconds);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
             "{} robots x {} scans in the {} world (seed {}): {} points, {} sightings ({} mutual) in {:.2} s -> {}",
             a.robots,
             a.scans_per_robot,
-            world.name(),
+            r.world,
             a.seed,
-            points,
-            data.sightings.len(),
-            mutual,
+            r.points,
+            r.sightings,
+            r.mutual_sightings,
             seconds,
             a.output.display()
         );

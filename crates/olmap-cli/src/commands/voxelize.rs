@@ -8,7 +8,9 @@ use anyhow::{bail, Context};
 use clap::Args;
 use olmap::geometry::{Pose, PoseList};
 use olmap::io::{self, ReadOptions};
-use olmap::occupancy::{self, InsertStats, OccupancyList, PositionBuckets, SensorModel, MAX_COUNT};
+use olmap::occupancy::{
+    self, InsertStats, OccupancyList, PositionBuckets, SensorModel, VoxelizeReport, MAX_COUNT,
+};
 
 use crate::args::{parse_pose, progress, set_threads, ThreadsArgs};
 
@@ -166,20 +168,20 @@ pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
     let seconds = start.elapsed().as_secs_f64();
     let stats = map.stats();
     if a.json {
-        let v = serde_json::json!({
-            "output": a.output.display().to_string(),
-            "clouds": a.clouds.len(),
-            "clouds_skipped_by_buckets": skipped_clouds,
-            "points": points,
-            "resolution": a.resolution,
-            "ray_trace": a.ray_trace,
-            "voxels": stats.voxels,
-            "skipped_points": total.skipped,
-            "truncated_rays": total.truncated,
-            "voxels_traversed": total.voxels_traversed,
-            "bytes_per_voxel": stats.bytes_per_voxel(),
-            "seconds": seconds,
-        });
+        let v = VoxelizeReport {
+            output: a.output.display().to_string(),
+            clouds: a.clouds.len(),
+            clouds_skipped_by_buckets: skipped_clouds,
+            points,
+            resolution: a.resolution,
+            ray_trace: a.ray_trace,
+            voxels: stats.voxels,
+            skipped_points: total.skipped,
+            truncated_rays: total.truncated,
+            voxels_traversed: total.voxels_traversed,
+            bytes_per_voxel: stats.bytes_per_voxel(),
+            seconds,
+        };
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

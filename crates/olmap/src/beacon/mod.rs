@@ -58,6 +58,7 @@ mod fit;
 pub mod landmark;
 mod lsq;
 mod reflective;
+mod report;
 mod rwht;
 
 pub use detection::Detection;
@@ -67,4 +68,5 @@ pub use fit::{
 pub use landmark::{pose_change_from_landmarks, LandmarkPose, Pose2};
 pub use lsq::{detect_circles_lsq, LsqParams};
 pub use reflective::{detect_circles_reflective, ReflectiveParams};
+pub use report::{BeaconsReport, DetectionReport};
 pub use rwht::{detect_circles_rwht, RwhtParams};

@@ -7,8 +7,10 @@
 mod filters;
 mod laser_scan;
 mod point_cloud;
+mod report;
 mod stats;
 
 pub use laser_scan::LaserScan;
 pub use point_cloud::PointCloud;
+pub use report::{BoxReport, RangeReport};
 pub use stats::{CloudStats, RangeStats};

@@ -27,6 +27,7 @@ pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
 mod poses;
+mod report;
 pub mod scan_graph;
 pub mod slam6d;
 pub mod uos;
@@ -38,6 +39,7 @@ use std::path::{Path, PathBuf};
 
 pub use discover::{is_cloud_file, scan_files};
 pub use poses::{file_stem_name, read_poses, read_poses_with};
+pub use report::{convert_cloud_file, CloudInfo, ConvertJob, ConvertReport, OrganizedSize};
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, ParseError, Result};

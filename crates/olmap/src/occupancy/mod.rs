@@ -22,7 +22,9 @@ mod overlap;
 mod packed;
 mod pyramid;
 mod query;
+mod query_report;
 mod raytrace;
+mod report;
 mod table;
 
 pub use buckets::PositionBuckets;
@@ -32,4 +34,8 @@ pub use olm::OLM_MAGIC;
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
 pub use query::RayHit;
+pub use query_report::{
+    AtReport, QueryReport, RadiusReport, RayHitReport, RayMissReport, SegmentReport, VoxelReport,
+};
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};
+pub use report::{describe_file, FileError, FileInfo, MapInfo, OctreeReport, VoxelizeReport};

@@ -23,6 +23,7 @@ mod coloured_cloud;
 mod depth;
 mod overlap_surface;
 mod png;
+mod report;
 mod top_view;
 
 pub use chart::{bar_chart, level_chart, line_chart, Series};
@@ -32,6 +33,7 @@ pub use depth::{render_depth, Camera, DepthImage};
 pub use image::{Rgb, RgbImage};
 pub use overlap_surface::{overlap_surface, OverlapSurface, OverlapSurfaceParams};
 pub use png::{png_bytes, write_png};
+pub use report::{DepthReport, OverlapReport, PeakReport, RenderReport, TopViewReport};
 pub use top_view::{render_top_view, TopView, TopViewOptions, BACKGROUND, GRID_COLOUR};
 
 /// The largest image side this module draws, in pixels.

@@ -48,6 +48,7 @@ mod error_model;
 mod pixel_mixing;
 mod raw_log;
 mod repeatability;
+mod report;
 mod triangulation;
 
 pub use convert::{convert_log, ConvertParams, ConvertStats, ConvertedScan, EncoderHistory};
@@ -55,6 +56,7 @@ pub use error_model::{cartesian_error, digitisation_error, update_rate_error};
 pub use pixel_mixing::{mixed_pixels, MixedPixelParams, RangeImage};
 pub use raw_log::{MirrorEvent, MirrorEventKind, MirrorLog, Sweep};
 pub use repeatability::{repeatability, RepeatabilityParams, RepeatabilityReport};
+pub use report::{DroppedReport, ScannerConvertReport};
 pub use triangulation::{
     intersect_ray_plane, optimal_baseline, triangulate_2d, triangulate_pixel,
     triangulation_range_error, LaserPlane, PinholeIntrinsics, Ray,

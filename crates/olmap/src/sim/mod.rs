@@ -7,6 +7,7 @@ mod benchmark;
 mod dataset;
 mod demo;
 pub mod files;
+mod report;
 mod rng;
 mod robot;
 mod scanners;
@@ -20,6 +21,7 @@ pub use benchmark::{thesis_localisation, LocalisationBenchmark, THESIS_RESOLUTIO
 pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
 pub use demo::{run_demo, DemoConfig, DemoReport, DemoRun};
 pub use files::{read_dataset, write_dataset, DatasetOnDisk};
+pub use report::SimulateReport;
 pub use rng::{mix64, SimRng};
 pub use robot::{
     odometry_for, plan_trajectories, BeaconMount, MotionModel, OdometryNoise, RobotModel,

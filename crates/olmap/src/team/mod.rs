@@ -8,6 +8,7 @@ mod clearing;
 mod html;
 mod mapper;
 mod mutual;
+mod mutual_report;
 mod pipeline;
 pub mod report;
 mod store;
@@ -20,6 +21,7 @@ pub use mutual::{
     expected_position_error, mutual_from_scans, mutual_pose, separations, MutualFix,
     MutualObservation, MutualParams, MutualReject,
 };
+pub use mutual_report::{observation_of_fix, MutualReport};
 pub use pipeline::{run_team_pipeline, TeamJob, TeamRun};
 pub use report::{SoloRun, TeamReport, TEAM_REPORT_FORMAT, TEAM_REPORT_VERSION};
 pub use store::{ScanStore, StoredScan, StoredSighting, STORE_MAGIC, STORE_VERSION};

@@ -22,6 +22,7 @@ const LAYERS: &[&[&str]] = &[
     &["team"],
     &["sim"],
     &["fixtures", "test_data"],
+    &["bench"],
 ];
 
 fn rank(module: &str) -> Option<usize> {
