@@ -14,10 +14,13 @@ pub enum Stage {
     TeamMap,
     /// Mapping every robot alone.
     SoloMaps,
+    /// Integrating clouds into one occupancy list.
+    Voxelize,
 }
 
 impl Stage {
-    /// The label of a progress bar: `simulate`, `read`, `map`, `team map`, `solo maps`.
+    /// The label of a progress bar: `simulate`, `read`, `map`, `team map`, `solo maps`,
+    /// `voxelize`.
     pub fn label(self) -> &'static str {
         match self {
             Stage::Simulate => "simulate",
@@ -25,6 +28,7 @@ impl Stage {
             Stage::Map => "map",
             Stage::TeamMap => "team map",
             Stage::SoloMaps => "solo maps",
+            Stage::Voxelize => "voxelize",
         }
     }
 }

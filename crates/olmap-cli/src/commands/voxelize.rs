@@ -1,18 +1,13 @@
 //! `olmap voxelize`: build an occupancy list from point clouds.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
-use anyhow::{bail, Context};
 use clap::Args;
-use olmap::geometry::{Pose, PoseList};
-use olmap::io::{self, ReadOptions};
-use olmap::occupancy::{
-    self, InsertStats, OccupancyList, PositionBuckets, SensorModel, VoxelizeReport, MAX_COUNT,
-};
+use olmap::io::ReadOptions;
+use olmap::occupancy::{run_voxelize, CloudPoses, SensorModel, VoxelizeJob, MAX_COUNT};
 
-use crate::args::{parse_pose, progress, set_threads, ThreadsArgs};
+use crate::args::{parse_pose, set_threads, StageBars, ThreadsArgs};
 
 /// Arguments of `olmap voxelize`.
 ///
@@ -68,142 +63,61 @@ pub struct VoxelizeArgs {
     pub json: bool,
 }
 
-fn stem(p: &Path) -> String {
-    p.file_stem()
-        .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
-}
-
-/// The pose of each cloud.
-fn poses_for(a: &VoxelizeArgs) -> anyhow::Result<Vec<Pose>> {
-    if let Some(p) = &a.pose {
-        return Ok(vec![parse_pose(p, "--pose")?; a.clouds.len()]);
-    }
-    let Some(files) = &a.poses else {
-        return Ok(vec![Pose::identity(); a.clouds.len()]);
-    };
-    let mut list = PoseList::default();
-    for f in files.split(',') {
-        list.poses.extend(olmap::io::read_poses(f)?.poses);
-    }
-    let mut out = Vec::new();
-    for c in &a.clouds {
-        let name = c
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let found = list.get(&name).or_else(|| list.get(&stem(c)));
-        match found {
-            Some(p) => out.push(*p),
-            None if list.len() == a.clouds.len() => {
-                // Pair by order.
-                out.push(list.poses[out.len()].pose);
-            }
-            None => bail!(
-                "no pose named '{}' or '{}' in {files} (names: {})",
-                name,
-                stem(c),
-                list.poses
-                    .iter()
-                    .map(|p| p.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        }
-    }
-    Ok(out)
-}
-
 /// Runs the command.
 pub fn run(a: &VoxelizeArgs) -> anyhow::Result<ExitCode> {
     set_threads(a.threads.threads)?;
-    let start = Instant::now();
-    if occupancy::MapFormat::from_path(&a.output).is_none() {
-        bail!(
-            "{}: the output must be a map file (.olm or .bt)",
-            a.output.display()
-        );
-    }
-    let poses = poses_for(a)?;
-    let model = SensorModel {
-        hit: a.hit,
-        miss: a.miss,
-        max_count: a.max_count,
-        max_range: a.max_range,
+    let poses = match (&a.pose, &a.poses) {
+        (Some(p), _) => CloudPoses::All(parse_pose(p, "--pose")?),
+        (None, Some(files)) => CloudPoses::Files(files.split(',').map(PathBuf::from).collect()),
+        (None, None) => CloudPoses::Identity,
     };
-    let mut map = OccupancyList::new(a.resolution)?;
-    let read = ReadOptions {
-        uos_valid_only: a.threedtk_valid,
-        ..Default::default()
+    let job = VoxelizeJob {
+        clouds: a.clouds.clone(),
+        output: a.output.clone(),
+        resolution: a.resolution,
+        ray_trace: a.ray_trace,
+        sensor: SensorModel {
+            hit: a.hit,
+            miss: a.miss,
+            max_count: a.max_count,
+            max_range: a.max_range,
+        },
+        poses,
+        bucket_radius: a.bucket_radius,
+        read: ReadOptions {
+            uos_valid_only: a.threedtk_valid,
+            ..Default::default()
+        },
     };
-    let bar = progress(a.clouds.len() as u64, "voxelize", a.json);
-    let mut total = InsertStats::default();
-    let mut points = 0usize;
-    let mut buckets = PositionBuckets::new(a.bucket_radius)?;
-    let mut skipped_clouds = 0usize;
-    for (path, pose) in a.clouds.iter().zip(&poses) {
-        let cloud = io::read_cloud_with(path, &read)?.cloud;
-        if a.bucket_radius > 0.0 && !buckets.admit(&pose.transform_point(&cloud.origin())) {
-            skipped_clouds += 1;
-            bar.inc(1);
-            continue;
-        }
-        points += cloud.len();
-        if a.ray_trace {
-            let s = map
-                .insert_scan(&cloud, pose, &model)
-                .with_context(|| format!("{}", path.display()))?;
-            total.rays += s.rays;
-            total.truncated += s.truncated;
-            total.skipped += s.skipped;
-            total.voxels_traversed += s.voxels_traversed;
-            total.removed_voxels += s.removed_voxels;
-        } else {
-            total.skipped += map.add_points(&cloud, pose, 1) as u64;
-        }
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    map.shrink_to_fit();
-    occupancy::write_map(&a.output, &map)?;
-    let seconds = start.elapsed().as_secs_f64();
-    let stats = map.stats();
+    let mut bars = StageBars::new(a.json);
+    let run = run_voxelize(&job, &mut |stage, done, total| {
+        bars.update(stage, done, total)
+    })?;
+    bars.finish();
+    let r = &run.report;
     if a.json {
-        let v = VoxelizeReport {
-            output: a.output.display().to_string(),
-            clouds: a.clouds.len(),
-            clouds_skipped_by_buckets: skipped_clouds,
-            points,
-            resolution: a.resolution,
-            ray_trace: a.ray_trace,
-            voxels: stats.voxels,
-            skipped_points: total.skipped,
-            truncated_rays: total.truncated,
-            voxels_traversed: total.voxels_traversed,
-            bytes_per_voxel: stats.bytes_per_voxel(),
-            seconds,
-        };
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(r)?);
     } else {
         println!(
             "{} clouds, {} points -> {} voxels at {} m{} in {:.2} s -> {}",
-            a.clouds.len(),
-            points,
-            stats.voxels,
-            a.resolution,
-            if a.ray_trace { " (ray traced)" } else { "" },
-            seconds,
+            r.clouds,
+            r.points,
+            r.voxels,
+            r.resolution,
+            if r.ray_trace { " (ray traced)" } else { "" },
+            r.seconds,
             a.output.display()
         );
-        if skipped_clouds > 0 {
+        if r.clouds_skipped_by_buckets > 0 {
             println!(
-                "  {skipped_clouds} clouds skipped: taken within {} m of an earlier one",
-                a.bucket_radius
+                "  {} clouds skipped: taken within {} m of an earlier one",
+                r.clouds_skipped_by_buckets, a.bucket_radius
             );
         }
-        if total.skipped > 0 {
+        if r.skipped_points > 0 {
             println!(
                 "  {} points skipped (non-finite or outside the map's key range)",
-                total.skipped
+                r.skipped_points
             );
         }
     }

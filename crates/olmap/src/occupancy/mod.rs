@@ -26,6 +26,7 @@ mod query_report;
 mod raytrace;
 mod report;
 mod table;
+mod voxelize;
 
 pub use buckets::PositionBuckets;
 pub use file::{read_map, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
@@ -39,3 +40,4 @@ pub use query_report::{
 };
 pub use raytrace::{InsertStats, SensorModel, VoxelRay};
 pub use report::{describe_file, FileError, FileInfo, MapInfo, OctreeReport, VoxelizeReport};
+pub use voxelize::{cloud_poses, run_voxelize, CloudPoses, VoxelizeJob, VoxelizeRun};
