@@ -5,7 +5,7 @@ use std::ops::RangeInclusive;
 use nalgebra::Point2;
 
 use super::detection::{beams_within, merge_duplicates, Detection};
-use super::fit::{circle_residual, fit_circle_polar, refine_circle};
+use super::fit::{circle_residual, fit_circle_polar, refine_circle, PolarFit};
 use crate::cloud::LaserScan;
 use crate::geometry::wrap_angle;
 
@@ -211,15 +211,29 @@ fn fit_candidate(
     radius: f64,
     params: &LsqParams,
 ) -> Option<Detection> {
+    let cap = params.outlier_distance.max(0.0);
+    let gate = 3.0 * params.max_rms;
+    let first = first_fit(beams, i, w, radius, cap)?;
+    let (second, center) = second_fit(beams, first, radius, gate, params);
+    // The test around the final centre.
+    let seen = Silhouette::of(center, second.bearing, radius, params.edge_margin)?;
+    if seen.core_outside(beams) {
+        // Part of the circle's core lies outside the scan: it cannot be verified.
+        return None;
+    }
+    let (sum, terms, returns) = seen.score(beams, radius, cap, gate, params)?;
+    seen.detection(beams, sum, terms, returns, params)
+}
+
+/// The first polar fit, on the returns of the window of beam `i` (`w` beams each side,
+/// one more) within `cap` of the hypothesis; `None` when it fails or its bearing strays
+/// beyond the window.
+fn first_fit(beams: &Beams, i: usize, w: usize, radius: f64, cap: f64) -> Option<PolarFit> {
     let scan = beams.scan;
     let n = scan.len();
     let step = scan.angle_increment.abs();
-    let cap = params.outlier_distance.max(0.0);
-    let gate = 3.0 * params.max_rms;
     let r = beams.range[i];
     let hypothesis = beams.point[i] * ((r + radius) / r);
-
-    // First polar fit on the hypothesis' inliers.
     let lo = i.saturating_sub(w + 1);
     let hi = (i + w + 1).min(n - 1);
     let samples: Vec<(f64, f64)> = (lo..=hi)
@@ -232,9 +246,19 @@ fn fit_candidate(
     if (first.bearing - scan.angle(i)).abs() > (radius / (r + radius)).asin() + step {
         return None;
     }
+    Some(first)
+}
 
-    // Second polar fit on the returns within the gate of the first circle, then the
-    // geometric refinement.
+/// The second polar fit, on the returns within `gate` of the first circle and within its
+/// window (the first fit when it fails), and the centre after the geometric refinement.
+fn second_fit(
+    beams: &Beams,
+    first: PolarFit,
+    radius: f64,
+    gate: f64,
+    params: &LsqParams,
+) -> (PolarFit, Point2<f64>) {
+    let scan = beams.scan;
     let center = first.center();
     let half = (radius / first.range).asin();
     let inliers: Vec<usize> = beams
@@ -254,84 +278,155 @@ fn fit_candidate(
     } else {
         second.center()
     };
+    (second, center)
+}
 
-    // The test around the final centre.
-    let c = center.coords.norm();
-    if c.is_nan() || c <= radius {
-        return None;
-    }
-    let bearing = second.bearing + wrap_angle(center.y.atan2(center.x) - second.bearing);
-    let half = (radius / c).asin();
-    let core = ((radius - params.edge_margin).max(0.0) / c).asin();
-    let (first_angle, last_angle) = (scan.angle(0), scan.angle(n - 1));
-    let (scan_lo, scan_hi) = (first_angle.min(last_angle), first_angle.max(last_angle));
-    if bearing - core < scan_lo - 0.5 * step || bearing + core > scan_hi + 0.5 * step {
-        // Part of the circle's core lies outside the scan: it cannot be verified.
-        return None;
-    }
-    let core_range = beams.around(bearing, core);
-    let beside_range = c - radius + params.edge_depth * radius;
-    let (mut sum, mut terms, mut returns) = (0.0, 0usize, 0usize);
-    for j in beams.around(bearing, half + step) {
-        let offset = scan.angle(j) - bearing;
-        let valid = beams.valid[j];
-        if offset.abs() > half {
-            // Just outside the silhouette: the circle must stand out from what is beside
-            // it (a wall seen head-on or the faces of a box corner continue there).
-            // (A return on the circle within `edge_margin` grazed it: the centre is
-            // uncertain by about that much.)
-            let grazes = valid
-                && circle_residual(&beams.point[j], &center, radius).abs() <= params.edge_margin;
-            if valid && !grazes && beams.range[j] < beside_range {
-                return None;
-            }
-            continue;
-        }
-        // Where the beam meets the circle's near side.
-        let along = c * offset.cos();
-        let across = c * offset.sin();
-        let surface = along - (radius * radius - across * across).max(0.0).sqrt();
-        let residual = valid.then(|| circle_residual(&beams.point[j], &center, radius).abs());
-        let inlier = residual.is_some_and(|e| e <= gate);
-        let in_front = valid && beams.range[j] < surface - gate;
-        if core_range.contains(&j) {
-            if valid && beams.range[j] < surface - cap {
-                return None; // Occluded or not a circle: not verifiable.
-            }
-            let e = residual.unwrap_or(cap).min(cap);
-            sum += e * e;
-            terms += 1;
-        } else if in_front {
-            // A return in front of the circle's edge: the surface there is flatter than
-            // the circle (or something occludes it).
+/// The fitted circle as the scanner sees it.
+struct Silhouette {
+    /// The centre.
+    center: Point2<f64>,
+    /// Range of the centre.
+    c: f64,
+    /// Bearing of the centre (unwrapped near the fit's bearing).
+    bearing: f64,
+    /// Half the angle the circle spans.
+    half: f64,
+    /// Half the angle of the core: the beams more than `edge_margin` inside the tangents.
+    core: f64,
+}
+
+impl Silhouette {
+    /// The silhouette of the circle of `radius` at `center`; `None` when the centre is
+    /// not finite or the sensor lies inside the circle.
+    fn of(center: Point2<f64>, fit_bearing: f64, radius: f64, edge_margin: f64) -> Option<Self> {
+        let c = center.coords.norm();
+        if c.is_nan() || c <= radius {
             return None;
-        } else if inlier {
-            let e = residual.unwrap_or(0.0);
-            sum += e * e;
-            terms += 1;
         }
-        if inlier {
-            returns += 1;
+        let bearing = fit_bearing + wrap_angle(center.y.atan2(center.x) - fit_bearing);
+        let half = (radius / c).asin();
+        let core = ((radius - edge_margin).max(0.0) / c).asin();
+        Some(Silhouette {
+            center,
+            c,
+            bearing,
+            half,
+            core,
+        })
+    }
+
+    /// Whether part of the core lies outside the scan (more than half a beam step beyond
+    /// its first or last beam).
+    fn core_outside(&self, beams: &Beams) -> bool {
+        let scan = beams.scan;
+        let n = scan.len();
+        let step = scan.angle_increment.abs();
+        let (bearing, core) = (self.bearing, self.core);
+        let (first_angle, last_angle) = (scan.angle(0), scan.angle(n - 1));
+        let (scan_lo, scan_hi) = (first_angle.min(last_angle), first_angle.max(last_angle));
+        bearing - core < scan_lo - 0.5 * step || bearing + core > scan_hi + 0.5 * step
+    }
+
+    /// Step 5's test of the beams around the silhouette: the sum of the squared residuals
+    /// entering the RMS, their number, and the number of returns on the circle; `None`
+    /// when a beam rules the circle out.
+    fn score(
+        &self,
+        beams: &Beams,
+        radius: f64,
+        cap: f64,
+        gate: f64,
+        params: &LsqParams,
+    ) -> Option<(f64, usize, usize)> {
+        let scan = beams.scan;
+        let step = scan.angle_increment.abs();
+        let (center, c, bearing, half) = (self.center, self.c, self.bearing, self.half);
+        let core_range = beams.around(bearing, self.core);
+        let beside_range = c - radius + params.edge_depth * radius;
+        let (mut sum, mut terms, mut returns) = (0.0, 0usize, 0usize);
+        for j in beams.around(bearing, half + step) {
+            let offset = scan.angle(j) - bearing;
+            let valid = beams.valid[j];
+            if offset.abs() > half {
+                // Just outside the silhouette: the circle must stand out from what is beside
+                // it (a wall seen head-on or the faces of a box corner continue there).
+                // (A return on the circle within `edge_margin` grazed it: the centre is
+                // uncertain by about that much.)
+                let grazes = valid
+                    && circle_residual(&beams.point[j], &center, radius).abs()
+                        <= params.edge_margin;
+                if valid && !grazes && beams.range[j] < beside_range {
+                    return None;
+                }
+                continue;
+            }
+            // Where the beam meets the circle's near side.
+            let along = c * offset.cos();
+            let across = c * offset.sin();
+            let surface = along - (radius * radius - across * across).max(0.0).sqrt();
+            let residual = valid.then(|| circle_residual(&beams.point[j], &center, radius).abs());
+            let inlier = residual.is_some_and(|e| e <= gate);
+            let in_front = valid && beams.range[j] < surface - gate;
+            if core_range.contains(&j) {
+                if valid && beams.range[j] < surface - cap {
+                    return None; // Occluded or not a circle: not verifiable.
+                }
+                let e = residual.unwrap_or(cap).min(cap);
+                sum += e * e;
+                terms += 1;
+            } else if in_front {
+                // A return in front of the circle's edge: the surface there is flatter than
+                // the circle (or something occludes it).
+                return None;
+            } else if inlier {
+                let e = residual.unwrap_or(0.0);
+                sum += e * e;
+                terms += 1;
+            }
+            if inlier {
+                returns += 1;
+            }
         }
+        Some((sum, terms, returns))
     }
-    if returns < params.min_returns.max(3) || terms == 0 {
-        return None;
+
+    /// The detection from step 5's score; `None` with too few returns or too large an RMS.
+    fn detection(
+        &self,
+        beams: &Beams,
+        sum: f64,
+        terms: usize,
+        returns: usize,
+        params: &LsqParams,
+    ) -> Option<Detection> {
+        let scan = beams.scan;
+        let n = scan.len();
+        if returns < params.min_returns.max(3) || terms == 0 {
+            return None;
+        }
+        let rms = (sum / terms as f64).sqrt();
+        if rms.is_nan() || rms > params.max_rms {
+            return None;
+        }
+        let expected = beams_within(
+            scan.angle_min,
+            scan.angle_increment,
+            n,
+            self.bearing,
+            self.half,
+        )
+        .max(1);
+        let coverage = (returns as f64 / expected as f64).min(1.0);
+        let quality = if params.max_rms > 0.0 {
+            (-(rms / params.max_rms).powi(2)).exp()
+        } else {
+            1.0
+        };
+        Some(Detection {
+            center: self.center,
+            rms,
+            returns,
+            confidence: (coverage * quality).clamp(0.0, 1.0),
+        })
     }
-    let rms = (sum / terms as f64).sqrt();
-    if rms.is_nan() || rms > params.max_rms {
-        return None;
-    }
-    let expected = beams_within(scan.angle_min, scan.angle_increment, n, bearing, half).max(1);
-    let coverage = (returns as f64 / expected as f64).min(1.0);
-    let quality = if params.max_rms > 0.0 {
-        (-(rms / params.max_rms).powi(2)).exp()
-    } else {
-        1.0
-    };
-    Some(Detection {
-        center,
-        rms,
-        returns,
-        confidence: (coverage * quality).clamp(0.0, 1.0),
-    })
 }

@@ -105,96 +105,144 @@ pub fn detect_circles_rwht(scan: &LaserScan, radius: f64, params: &RwhtParams) -
     {
         return Vec::new();
     }
-    // The returns: point, range, bearing.
-    let returns: Vec<(Point2<f64>, f64, f64)> = (0..scan.len())
+    let returns = valid_returns(scan);
+    if returns.is_empty() {
+        return Vec::new();
+    }
+    let mut acc = Accumulator::covering(&returns, radius, params.cell);
+    acc.vote(&returns, radius);
+    let full = 2.0 * radius / step;
+    let Some(peaks) = acc.peaks(params, full) else {
+        return Vec::new();
+    };
+    let found = detections_at_peaks(&acc, peaks, &returns, radius, step, full, params);
+    merge_duplicates(found, radius)
+}
+
+/// A valid return: its point, range and bearing.
+type Return = (Point2<f64>, f64, f64);
+
+/// The scan's valid returns, in beam order.
+fn valid_returns(scan: &LaserScan) -> Vec<Return> {
+    (0..scan.len())
         .filter(|&i| scan.is_valid(i))
         .map(|i| {
             let r = scan.ranges[i] as f64;
             let a = scan.angle(i);
             (Point2::new(r * a.cos(), r * a.sin()), r, a)
         })
-        .collect();
-    if returns.is_empty() {
-        return Vec::new();
-    }
-    let grow = radius + 2.0 * params.cell;
-    let (mut min, mut max) = (returns[0].0, returns[0].0);
-    for (p, _, _) in &returns {
-        min = min.inf(p);
-        max = max.sup(p);
-    }
-    let min = min - nalgebra::Vector2::new(grow, grow);
-    let max = max + nalgebra::Vector2::new(grow, grow);
-    let mut cell = params.cell;
-    let dims = |cell: f64| {
-        (
-            ((max.x - min.x) / cell).ceil() as usize + 1,
-            ((max.y - min.y) / cell).ceil() as usize + 1,
-        )
-    };
-    let (mut nx, mut ny) = dims(cell);
-    while nx.saturating_mul(ny) > MAX_CELLS {
-        cell *= 2.0;
-        (nx, ny) = dims(cell);
-    }
-    let mut acc = vec![0.0f32; nx * ny];
+        .collect()
+}
 
-    // Votes along the far half-circle of each return.
-    let samples = ((std::f64::consts::PI * radius / (0.5 * cell)).ceil() as usize).max(2);
-    for &(p, r, a) in &returns {
-        let mut last = usize::MAX;
-        for k in 0..=samples {
-            let beta =
-                a - std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * k as f64 / samples as f64;
-            let cx = ((p.x + radius * beta.cos() - min.x) / cell) as usize;
-            let cy = ((p.y + radius * beta.sin() - min.y) / cell) as usize;
-            let idx = cy * nx + cx;
-            if idx != last {
-                acc[idx] += r as f32;
-                last = idx;
-            }
+/// The Hough accumulator: range-weighted votes for candidate centres on a square grid.
+struct Accumulator {
+    /// The votes, row by row (`y * nx + x`).
+    acc: Vec<f32>,
+    /// Cells along x.
+    nx: usize,
+    /// Cells along y.
+    ny: usize,
+    /// The corner of cell `(0, 0)`.
+    min: Point2<f64>,
+    /// Cell size, metres.
+    cell: f64,
+}
+
+impl Accumulator {
+    /// An empty accumulator over the bounding box of `returns` (not empty) grown by the
+    /// radius and two cells, its cells `cell` metres square, doubled until there are at
+    /// most [`MAX_CELLS`].
+    fn covering(returns: &[Return], radius: f64, cell: f64) -> Self {
+        let grow = radius + 2.0 * cell;
+        let (mut min, mut max) = (returns[0].0, returns[0].0);
+        for (p, _, _) in returns {
+            min = min.inf(p);
+            max = max.sup(p);
+        }
+        let min = min - nalgebra::Vector2::new(grow, grow);
+        let max = max + nalgebra::Vector2::new(grow, grow);
+        let mut cell = cell;
+        let dims = |cell: f64| {
+            (
+                ((max.x - min.x) / cell).ceil() as usize + 1,
+                ((max.y - min.y) / cell).ceil() as usize + 1,
+            )
+        };
+        let (mut nx, mut ny) = dims(cell);
+        while nx.saturating_mul(ny) > MAX_CELLS {
+            cell *= 2.0;
+            (nx, ny) = dims(cell);
+        }
+        Accumulator {
+            acc: vec![0.0f32; nx * ny],
+            nx,
+            ny,
+            min,
+            cell,
         }
     }
 
-    // 3 x 3 local maxima above the thresholds.
-    let best = acc.iter().copied().fold(0.0f32, f32::max) as f64;
-    let full = 2.0 * radius / step;
-    let threshold = (params.min_fraction * best).max(params.min_support * full);
-    if best <= 0.0 || best < threshold {
-        return Vec::new();
-    }
-    let mut peaks: Vec<(f32, usize, usize)> = Vec::new();
-    for y in 1..ny - 1 {
-        for x in 1..nx - 1 {
-            let v = acc[y * nx + x];
-            if (v as f64) < threshold {
-                continue;
-            }
-            let mut is_max = true;
-            'n: for dy in 0..3 {
-                for dx in 0..3 {
-                    let j = (y + dy - 1) * nx + (x + dx - 1);
-                    let earlier = j < y * nx + x;
-                    let w = acc[j];
-                    if (earlier && w >= v) || (!earlier && w > v) {
-                        is_max = false;
-                        break 'n;
-                    }
+    /// Each return votes, with its range as weight, once per cell along the far half of
+    /// the circle of `radius` around it.
+    fn vote(&mut self, returns: &[Return], radius: f64) {
+        let (nx, min, cell) = (self.nx, self.min, self.cell);
+        let samples = ((std::f64::consts::PI * radius / (0.5 * cell)).ceil() as usize).max(2);
+        for &(p, r, a) in returns {
+            let mut last = usize::MAX;
+            for k in 0..=samples {
+                let beta = a - std::f64::consts::FRAC_PI_2
+                    + std::f64::consts::PI * k as f64 / samples as f64;
+                let cx = ((p.x + radius * beta.cos() - min.x) / cell) as usize;
+                let cy = ((p.y + radius * beta.sin() - min.y) / cell) as usize;
+                let idx = cy * nx + cx;
+                if idx != last {
+                    self.acc[idx] += r as f32;
+                    last = idx;
                 }
             }
-            if is_max {
-                peaks.push((v, x, y));
-            }
         }
     }
-    peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
 
-    let mut found: Vec<Detection> = Vec::new();
-    let k = params.refine_cells as isize;
-    for (votes, x, y) in peaks {
-        if found.len() >= params.max_peaks {
-            break;
+    /// The 3 x 3 local maxima above the thresholds (`full`: a full circle's votes) as
+    /// `(votes, x, y)`, strongest first; `None` when no cell can pass.
+    fn peaks(&self, params: &RwhtParams, full: f64) -> Option<Vec<(f32, usize, usize)>> {
+        let (acc, nx, ny) = (&self.acc, self.nx, self.ny);
+        let best = acc.iter().copied().fold(0.0f32, f32::max) as f64;
+        let threshold = (params.min_fraction * best).max(params.min_support * full);
+        if best <= 0.0 || best < threshold {
+            return None;
         }
+        let mut peaks: Vec<(f32, usize, usize)> = Vec::new();
+        for y in 1..ny - 1 {
+            for x in 1..nx - 1 {
+                let v = acc[y * nx + x];
+                if (v as f64) < threshold {
+                    continue;
+                }
+                let mut is_max = true;
+                'n: for dy in 0..3 {
+                    for dx in 0..3 {
+                        let j = (y + dy - 1) * nx + (x + dx - 1);
+                        let earlier = j < y * nx + x;
+                        let w = acc[j];
+                        if (earlier && w >= v) || (!earlier && w > v) {
+                            is_max = false;
+                            break 'n;
+                        }
+                    }
+                }
+                if is_max {
+                    peaks.push((v, x, y));
+                }
+            }
+        }
+        peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
+        Some(peaks)
+    }
+
+    /// The vote-weighted mean of the cell centres within `k` cells of cell `(x, y)`.
+    fn refined_centre(&self, x: usize, y: usize, k: isize) -> Point2<f64> {
+        let (nx, ny, min, cell) = (self.nx, self.ny, self.min, self.cell);
         let (mut sw, mut sx, mut sy) = (0.0, 0.0, 0.0);
         for dy in -k..=k {
             for dx in -k..=k {
@@ -202,38 +250,81 @@ pub fn detect_circles_rwht(scan: &LaserScan, radius: f64, params: &RwhtParams) -
                 if cx < 0 || cy < 0 || cx >= nx as isize || cy >= ny as isize {
                     continue;
                 }
-                let w = acc[cy as usize * nx + cx as usize] as f64;
+                let w = self.acc[cy as usize * nx + cx as usize] as f64;
                 sw += w;
                 sx += w * (min.x + (cx as f64 + 0.5) * cell);
                 sy += w * (min.y + (cy as f64 + 0.5) * cell);
             }
         }
-        let center = Point2::new(sx / sw, sy / sw);
+        Point2::new(sx / sw, sy / sw)
+    }
+}
+
+/// A detection per peak, strongest first, at most `max_peaks`, skipping any within
+/// `radius` of one already found.
+fn detections_at_peaks(
+    acc: &Accumulator,
+    peaks: Vec<(f32, usize, usize)>,
+    returns: &[Return],
+    radius: f64,
+    step: f64,
+    full: f64,
+    params: &RwhtParams,
+) -> Vec<Detection> {
+    let mut found: Vec<Detection> = Vec::new();
+    let k = params.refine_cells as isize;
+    for (votes, x, y) in peaks {
+        if found.len() >= params.max_peaks {
+            break;
+        }
+        let center = acc.refined_centre(x, y, k);
         if found.iter().any(|d| (d.center - center).norm() < radius) {
             continue;
         }
-        let members: Vec<f64> = returns
-            .iter()
-            .map(|(p, _, _)| circle_residual(p, &center, radius))
-            .filter(|e| *e <= params.member_tolerance)
-            .collect();
-        let rms = if members.is_empty() {
-            f64::INFINITY
-        } else {
-            (members.iter().map(|e| e * e).sum::<f64>() / members.len() as f64).sqrt()
-        };
-        let c = center.coords.norm();
-        let expected = if c > radius {
-            2.0 * (radius / c).asin() * c / step
-        } else {
-            full
-        };
-        found.push(Detection {
+        found.push(describe(
             center,
-            rms,
-            returns: members.len(),
-            confidence: (votes as f64 / expected).clamp(0.0, 1.0),
-        });
+            votes,
+            returns,
+            radius,
+            step,
+            full,
+            params.member_tolerance,
+        ));
     }
-    merge_duplicates(found, radius)
+    found
+}
+
+/// The detection at `center`: the RMS and count of the returns within `radius +
+/// tolerance`, and the peak's `votes` over a full circle's at the centre's range.
+fn describe(
+    center: Point2<f64>,
+    votes: f32,
+    returns: &[Return],
+    radius: f64,
+    step: f64,
+    full: f64,
+    tolerance: f64,
+) -> Detection {
+    let members: Vec<f64> = returns
+        .iter()
+        .map(|(p, _, _)| circle_residual(p, &center, radius))
+        .filter(|e| *e <= tolerance)
+        .collect();
+    let rms = if members.is_empty() {
+        f64::INFINITY
+    } else {
+        (members.iter().map(|e| e * e).sum::<f64>() / members.len() as f64).sqrt()
+    };
+    let c = center.coords.norm();
+    let expected = if c > radius {
+        2.0 * (radius / c).asin() * c / step
+    } else {
+        full
+    };
+    Detection {
+        center,
+        rms,
+        returns: members.len(),
+        confidence: (votes as f64 / expected).clamp(0.0, 1.0),
+    }
 }

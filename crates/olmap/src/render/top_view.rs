@@ -107,6 +107,29 @@ impl TopView {
 pub fn render_top_view(map: &OccupancyList, options: &TopViewOptions) -> Result<TopView> {
     let r = map.resolution();
     let ps = options.pixel_size.unwrap_or(r);
+    check_options(ps, options)?;
+    let min_count = options.min_count.max(1);
+    let (top, z_lo, z_hi) = highest_per_column(map, options.band, min_count);
+    let z_range = options.band.unwrap_or((z_lo, z_hi));
+    let frame = Frame::covering(&top, r, ps, options)?;
+    let mut image = RgbImage::from_pixel(frame.w, frame.h, BACKGROUND);
+    if let Some(g) = options.grid_step {
+        draw_grid(&mut image, &frame, g);
+    }
+    let columns = paint_columns(&mut image, &frame, top, r, z_range);
+    draw_paths_and_positions(&mut image, &frame, options)?;
+    Ok(TopView {
+        image,
+        x_min: frame.x_min,
+        y_max: frame.y_max,
+        pixel_size: ps,
+        z_range,
+        columns,
+    })
+}
+
+/// Errors on an invalid pixel size `ps`, band, grid step or margin.
+fn check_options(ps: f64, options: &TopViewOptions) -> Result<()> {
     if !(ps.is_finite() && ps > 0.0) {
         return Err(Error::InvalidArgument(format!(
             "pixel size must be > 0 m, got {ps}"
@@ -132,8 +155,17 @@ pub fn render_top_view(map: &OccupancyList, options: &TopViewOptions) -> Result<
             options.margin
         )));
     }
-    let min_count = options.min_count.max(1);
-    // Highest voxel centre per column within the band.
+    Ok(())
+}
+
+/// The highest voxel centre per `(x, y)` column among the voxels with at least `min_count`
+/// within the band, and the lowest and highest such centres (infinite when none).
+fn highest_per_column(
+    map: &OccupancyList,
+    band: Option<(f64, f64)>,
+    min_count: u16,
+) -> (FxHashMap<(i32, i32), f64>, f64, f64) {
+    let r = map.resolution();
     let mut top: FxHashMap<(i32, i32), f64> = FxHashMap::default();
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for (k, c) in map.iter() {
@@ -141,7 +173,7 @@ pub fn render_top_view(map: &OccupancyList, options: &TopViewOptions) -> Result<
             continue;
         }
         let z = (k.z as f64 + 0.5) * r;
-        if let Some((lo, hi)) = options.band {
+        if let Some((lo, hi)) = band {
             if z < lo || z > hi {
                 continue;
             }
@@ -151,97 +183,168 @@ pub fn render_top_view(map: &OccupancyList, options: &TopViewOptions) -> Result<
         let e = top.entry((k.x, k.y)).or_insert(f64::NEG_INFINITY);
         *e = e.max(z);
     }
-    let z_range = options.band.unwrap_or((z_lo, z_hi));
-    // Extent: columns, positions and paths.
-    let (mut x0, mut y0, mut x1, mut y1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    let mut cover = |x: f64, y: f64| {
-        x0 = x0.min(x);
-        y0 = y0.min(y);
-        x1 = x1.max(x);
-        y1 = y1.max(y);
-    };
-    for &(i, j) in top.keys() {
-        cover(i as f64 * r, j as f64 * r);
-        cover((i + 1) as f64 * r, (j + 1) as f64 * r);
+    (top, z_lo, z_hi)
+}
+
+/// The bounding box of what a top view shows, grown point by point.
+struct Extent {
+    x0: f64,
+    y0: f64,
+    x1: f64,
+    y1: f64,
+}
+
+impl Extent {
+    fn cover(&mut self, x: f64, y: f64) {
+        self.x0 = self.x0.min(x);
+        self.y0 = self.y0.min(y);
+        self.x1 = self.x1.max(x);
+        self.y1 = self.y1.max(y);
     }
-    for p in options
-        .positions
-        .iter()
-        .chain(options.paths.iter().flatten())
-    {
-        if !(p.x.is_finite() && p.y.is_finite()) {
+}
+
+/// Where the picture lies in the world and its size in pixels.
+#[derive(Clone, Copy)]
+struct Frame {
+    /// World x of the left edge.
+    x_min: f64,
+    /// World y of the top edge.
+    y_max: f64,
+    /// Metres per pixel.
+    ps: f64,
+    /// Width, pixels.
+    w: u32,
+    /// Height, pixels.
+    h: u32,
+}
+
+impl Frame {
+    /// The frame covering the columns, positions and paths plus the margin. Errors on a
+    /// position or path point that is not finite, or a picture too large.
+    fn covering(
+        top: &FxHashMap<(i32, i32), f64>,
+        r: f64,
+        ps: f64,
+        options: &TopViewOptions,
+    ) -> Result<Frame> {
+        let mut e = Extent {
+            x0: f64::INFINITY,
+            y0: f64::INFINITY,
+            x1: f64::NEG_INFINITY,
+            y1: f64::NEG_INFINITY,
+        };
+        for &(i, j) in top.keys() {
+            e.cover(i as f64 * r, j as f64 * r);
+            e.cover((i + 1) as f64 * r, (j + 1) as f64 * r);
+        }
+        for p in options
+            .positions
+            .iter()
+            .chain(options.paths.iter().flatten())
+        {
+            if !(p.x.is_finite() && p.y.is_finite()) {
+                return Err(Error::InvalidArgument(format!(
+                    "positions and paths must be finite, got {p}"
+                )));
+            }
+            e.cover(p.x, p.y);
+        }
+        let Extent {
+            mut x0,
+            mut y0,
+            mut x1,
+            mut y1,
+        } = e;
+        if !x0.is_finite() {
+            (x0, y0, x1, y1) = (0.0, 0.0, ps, ps);
+        }
+        let m = options.margin;
+        let (x_min, y_max) = (x0 - m, y1 + m);
+        let w = ((x1 + m - x_min) / ps).ceil().max(1.0);
+        let h = ((y_max - (y0 - m)) / ps).ceil().max(1.0);
+        if w > super::MAX_SIDE as f64 || h > super::MAX_SIDE as f64 {
             return Err(Error::InvalidArgument(format!(
-                "positions and paths must be finite, got {p}"
+                "a top view of {w} x {h} pixels is over the limit of {} a side; use a larger pixel size",
+                super::MAX_SIDE
             )));
         }
-        cover(p.x, p.y);
+        let (w, h) = (w as u32, h as u32);
+        check_size(w, h)?;
+        Ok(Frame {
+            x_min,
+            y_max,
+            ps,
+            w,
+            h,
+        })
     }
-    if !x0.is_finite() {
-        (x0, y0, x1, y1) = (0.0, 0.0, ps, ps);
-    }
-    let m = options.margin;
-    let (x_min, y_max) = (x0 - m, y1 + m);
-    let w = ((x1 + m - x_min) / ps).ceil().max(1.0);
-    let h = ((y_max - (y0 - m)) / ps).ceil().max(1.0);
-    if w > super::MAX_SIDE as f64 || h > super::MAX_SIDE as f64 {
-        return Err(Error::InvalidArgument(format!(
-            "a top view of {w} x {h} pixels is over the limit of {} a side; use a larger pixel size",
-            super::MAX_SIDE
-        )));
-    }
-    let (w, h) = (w as u32, h as u32);
-    check_size(w, h)?;
-    let mut image = RgbImage::from_pixel(w, h, BACKGROUND);
-    let to_px = |x: f64, y: f64| {
+
+    /// The pixel `(column, row)` of the world point `(x, y)`, possibly outside the image.
+    fn pixel(&self, x: f64, y: f64) -> (i32, i32) {
         (
-            ((x - x_min) / ps + EPS).floor() as i32,
-            ((y_max - y) / ps + EPS).floor() as i32,
+            ((x - self.x_min) / self.ps + EPS).floor() as i32,
+            ((self.y_max - y) / self.ps + EPS).floor() as i32,
         )
-    };
-    if let Some(g) = options.grid_step {
-        let (gx0, gx1) = (
-            (x_min / g).ceil() as i64,
-            ((x_min + w as f64 * ps) / g).floor() as i64,
-        );
-        let (gy0, gy1) = (
-            ((y_max - h as f64 * ps) / g).ceil() as i64,
-            (y_max / g).floor() as i64,
-        );
-        for k in gx0..=gx1 {
-            let (i, _) = to_px(k as f64 * g, y_max);
-            if (0..w as i32).contains(&i) {
-                for j in 0..h {
-                    image.put_pixel(i as u32, j, GRID_COLOUR);
-                }
-            }
-        }
-        for k in gy0..=gy1 {
-            let (_, j) = to_px(x_min, k as f64 * g);
-            if (0..h as i32).contains(&j) {
-                for i in 0..w {
-                    image.put_pixel(i, j as u32, GRID_COLOUR);
-                }
+    }
+}
+
+/// Draws the grid lines every `g` metres across the whole image.
+fn draw_grid(image: &mut RgbImage, frame: &Frame, g: f64) {
+    let Frame {
+        x_min,
+        y_max,
+        ps,
+        w,
+        h,
+    } = *frame;
+    let (gx0, gx1) = (
+        (x_min / g).ceil() as i64,
+        ((x_min + w as f64 * ps) / g).floor() as i64,
+    );
+    let (gy0, gy1) = (
+        ((y_max - h as f64 * ps) / g).ceil() as i64,
+        (y_max / g).floor() as i64,
+    );
+    for k in gx0..=gx1 {
+        let (i, _) = frame.pixel(k as f64 * g, y_max);
+        if (0..w as i32).contains(&i) {
+            for j in 0..h {
+                image.put_pixel(i as u32, j, GRID_COLOUR);
             }
         }
     }
+    for k in gy0..=gy1 {
+        let (_, j) = frame.pixel(x_min, k as f64 * g);
+        if (0..h as i32).contains(&j) {
+            for i in 0..w {
+                image.put_pixel(i, j as u32, GRID_COLOUR);
+            }
+        }
+    }
+}
+
+/// Paints each column in the colour of its height within `z_range`, lowest first so that,
+/// when pixels are larger than voxels, a pixel shows its highest column. Returns the
+/// number of columns.
+fn paint_columns(
+    image: &mut RgbImage,
+    frame: &Frame,
+    top: FxHashMap<(i32, i32), f64>,
+    r: f64,
+    z_range: (f64, f64),
+) -> usize {
+    let (w, h) = (frame.w, frame.h);
     let span = (z_range.1 - z_range.0).max(1e-9);
-    // Paint columns lowest first so that, when pixels are larger than voxels, a pixel shows
-    // its highest column.
     let mut columns: Vec<((i32, i32), f64)> = top.into_iter().collect();
     columns.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
     for &((i, j), z) in &columns {
         let colour = height_colour((z - z_range.0) / span);
         let (pa, pb) = (
-            to_px(i as f64 * r, (j + 1) as f64 * r),
-            to_px((i + 1) as f64 * r, j as f64 * r),
+            frame.pixel(i as f64 * r, (j + 1) as f64 * r),
+            frame.pixel((i + 1) as f64 * r, j as f64 * r),
         );
         // The pixels whose area the column covers (at least the one of its centre).
-        let (cx, cy) = to_px((i as f64 + 0.5) * r, (j as f64 + 0.5) * r);
+        let (cx, cy) = frame.pixel((i as f64 + 0.5) * r, (j as f64 + 0.5) * r);
         let (ia, ib) = (pa.0.min(cx), (pb.0 - 1).max(cx));
         let (ja, jb) = (pa.1.min(cy), (pb.1 - 1).max(cy));
         for py in ja.max(0)..=jb.min(h as i32 - 1) {
@@ -250,30 +353,30 @@ pub fn render_top_view(map: &OccupancyList, options: &TopViewOptions) -> Result<
             }
         }
     }
-    {
-        let root = BitMapBackend::with_buffer(&mut image, (w, h)).into_drawing_area();
-        for (n, path) in options.paths.iter().enumerate() {
-            let [r, g, b] = PALETTE[n % PALETTE.len()];
-            let pts: Vec<(i32, i32)> = path.iter().map(|p| to_px(p.x, p.y)).collect();
-            root.draw(&PathElement::new(pts, RGBColor(r, g, b).stroke_width(2)))
-                .map_err(draw_error)?;
-        }
-        for p in &options.positions {
-            let (i, j) = to_px(p.x, p.y);
-            root.draw(&Rectangle::new(
-                [(i - 2, j - 2), (i + 2, j + 2)],
-                BLACK.filled(),
-            ))
+    columns.len()
+}
+
+/// Draws the paths (in [`PALETTE`] colours) and the scan positions (small black squares).
+fn draw_paths_and_positions(
+    image: &mut RgbImage,
+    frame: &Frame,
+    options: &TopViewOptions,
+) -> Result<()> {
+    let root = BitMapBackend::with_buffer(image, (frame.w, frame.h)).into_drawing_area();
+    for (n, path) in options.paths.iter().enumerate() {
+        let [r, g, b] = PALETTE[n % PALETTE.len()];
+        let pts: Vec<(i32, i32)> = path.iter().map(|p| frame.pixel(p.x, p.y)).collect();
+        root.draw(&PathElement::new(pts, RGBColor(r, g, b).stroke_width(2)))
             .map_err(draw_error)?;
-        }
-        root.present().map_err(draw_error)?;
     }
-    Ok(TopView {
-        image,
-        x_min,
-        y_max,
-        pixel_size: ps,
-        z_range,
-        columns: columns.len(),
-    })
+    for p in &options.positions {
+        let (i, j) = frame.pixel(p.x, p.y);
+        root.draw(&Rectangle::new(
+            [(i - 2, j - 2), (i + 2, j + 2)],
+            BLACK.filled(),
+        ))
+        .map_err(draw_error)?;
+    }
+    root.present().map_err(draw_error)?;
+    Ok(())
 }

@@ -283,26 +283,81 @@ pub fn convert_log(log: &MirrorLog, params: &ConvertParams) -> Result<ConvertedS
     {
         return bad("conversion: max_range must be > 0, min_range and extrapolation >= 0".into());
     }
-    let extrapolation = params.max_extrapolation_ticks * history.mean_tick_interval();
-    let cols = log.sweeps.iter().map(|s| s.ranges.len()).max().unwrap_or(0);
-    let with_intensity =
-        !log.sweeps.is_empty() && log.sweeps.iter().all(|s| s.intensities.is_some());
+    let conversion = Conversion {
+        log,
+        params,
+        extrapolation: params.max_extrapolation_ticks * history.mean_tick_interval(),
+        history,
+        max_range,
+        theta_limit,
+        cols: log.sweeps.iter().map(|s| s.ranges.len()).max().unwrap_or(0),
+        with_intensity: !log.sweeps.is_empty()
+            && log.sweeps.iter().all(|s| s.intensities.is_some()),
+    };
     let mut stats = ConvertStats {
         sweeps: log.sweeps.len(),
-        trigger_mismatches: history.trigger_mismatches,
+        trigger_mismatches: conversion.history.trigger_mismatches,
         ..ConvertStats::default()
     };
-    // Candidates after the geometric checks: (sweep, beam, point, intensity, range beyond
-    // the mirror, mirror angle). Range and elevation limits are applied after the
-    // mixed-pixel filter has seen every return.
-    type Candidate = (u32, u32, Point3<f64>, f32, f64, f64);
-    let mut cand: Vec<Candidate> = Vec::new();
-    let mut last_time = f64::NEG_INFINITY;
-    for (k, s) in log.sweeps.iter().enumerate() {
-        check_sweep(s, k, &mut last_time)?;
-        stats.beams += s.ranges.len();
+    let cand = conversion.candidates(&mut stats)?;
+    let mixed = conversion.mixed(&cand)?;
+    let (cloud, sources) = conversion.points(cand, mixed, &mut stats)?;
+    stats.points = cloud.len();
+    Ok(ConvertedScan {
+        cloud,
+        sources,
+        stats,
+    })
+}
+
+/// A return after the geometric checks: (sweep, beam, point, intensity, range beyond the
+/// mirror, mirror angle).
+type Candidate = (u32, u32, Point3<f64>, f32, f64, f64);
+
+/// One conversion's inputs and settings, resolved from the log's header and the
+/// parameters.
+struct Conversion<'a> {
+    log: &'a MirrorLog,
+    params: &'a ConvertParams,
+    history: EncoderHistory,
+    /// Longest range kept, metres.
+    max_range: f64,
+    /// Largest `|theta|` kept, radians.
+    theta_limit: f64,
+    /// How far beyond the encoder history the mirror angle may be extrapolated, seconds.
+    extrapolation: f64,
+    /// The most beams in a sweep: the width of the range image.
+    cols: usize,
+    /// Whether every sweep has intensities (and there is at least one).
+    with_intensity: bool,
+}
+
+impl Conversion<'_> {
+    /// The candidates after the geometric checks, sweep by sweep, beam by beam. Range and
+    /// elevation limits are applied after the mixed-pixel filter has seen every return.
+    fn candidates(&self, stats: &mut ConvertStats) -> Result<Vec<Candidate>> {
+        let mut cand: Vec<Candidate> = Vec::new();
+        let mut last_time = f64::NEG_INFINITY;
+        for (k, s) in self.log.sweeps.iter().enumerate() {
+            check_sweep(s, k, &mut last_time)?;
+            stats.beams += s.ranges.len();
+            self.sweep_candidates(k, s, stats, &mut cand)?;
+        }
+        Ok(cand)
+    }
+
+    /// Adds sweep `k`'s candidates to `cand`, counting the dropped beams. Errors when the
+    /// sweep lies outside the encoder history.
+    fn sweep_candidates(
+        &self,
+        k: usize,
+        s: &Sweep,
+        stats: &mut ConvertStats,
+        cand: &mut Vec<Candidate>,
+    ) -> Result<()> {
+        let (g, history, extrapolation) = (&self.log.header, &self.history, self.extrapolation);
         let time_of = |i: usize| {
-            if params.within_sweep_correction {
+            if self.params.within_sweep_correction {
                 s.beam_time(i)
             } else {
                 s.time
@@ -312,9 +367,9 @@ pub fn convert_log(log: &MirrorLog, params: &ConvertParams) -> Result<ConvertedS
         for t in [time_of(0), time_of(n.saturating_sub(1))] {
             if history.angle_at(t, extrapolation).is_none() {
                 let (a, b) = history.span();
-                return bad(format!(
-                    "sweep {k} (t = {t}) lies outside the encoder history [{a}, {b}]"
-                ));
+                return Err(Error::InvalidArgument(format!(
+                    "mirror log: sweep {k} (t = {t}) lies outside the encoder history [{a}, {b}]"
+                )));
             }
         }
         for i in 0..n {
@@ -327,7 +382,7 @@ pub fn convert_log(log: &MirrorLog, params: &ConvertParams) -> Result<ConvertedS
             let alpha = history
                 .angle_at(time_of(i), extrapolation)
                 .expect("checked at the sweep's ends");
-            match blind(g, theta_limit, theta, alpha) {
+            match blind(g, self.theta_limit, theta, alpha) {
                 Some(Blind::Outside) => stats.outside_mirror += 1,
                 Some(Blind::EdgeOn) => stats.edge_on += 1,
                 Some(Blind::Blocked) => stats.blocked += 1,
@@ -345,59 +400,72 @@ pub fn convert_log(log: &MirrorLog, params: &ConvertParams) -> Result<ConvertedS
                 }
             }
         }
+        Ok(())
     }
-    let mixed = if params.filter_mixed {
-        let mut ranges = vec![f32::INFINITY; log.sweeps.len() * cols];
-        for c in &cand {
+
+    /// The mixed-pixel mask over the range image (`sweep * cols + beam`) of the
+    /// candidates' ranges beyond the mirror, when asked for.
+    fn mixed(&self, cand: &[Candidate]) -> Result<Option<Vec<bool>>> {
+        if !self.params.filter_mixed {
+            return Ok(None);
+        }
+        let (sweeps, cols) = (self.log.sweeps.len(), self.cols);
+        let mut ranges = vec![f32::INFINITY; sweeps * cols];
+        for c in cand {
             ranges[c.0 as usize * cols + c.1 as usize] = c.4 as f32;
         }
-        let image = RangeImage::new(log.sweeps.len(), cols, ranges)?;
-        Some(mixed_pixels(&image, &params.mixed)?)
-    } else {
-        None
-    };
-    let mut cloud = PointCloud::with_capacity(cand.len());
-    let mut intensity = Vec::with_capacity(if with_intensity { cand.len() } else { 0 });
-    let mut sources = Vec::with_capacity(cand.len());
-    for (k, i, p, v, _, alpha) in cand {
-        let s = &log.sweeps[k as usize];
-        let r = s.ranges[i as usize] as f64;
-        if r > max_range {
-            stats.beyond_max_range += 1;
-            continue;
-        }
-        if r < params.min_range {
-            stats.below_min_range += 1;
-            continue;
-        }
-        if let Some((lo, hi)) = params.elevation_window {
-            let phi = MirrorGeometry::reflected_elevation(alpha).rem_euclid(TAU);
-            if !(phi >= lo && phi <= hi) {
-                stats.outside_elevation += 1;
+        let image = RangeImage::new(sweeps, cols, ranges)?;
+        Ok(Some(mixed_pixels(&image, &self.params.mixed)?))
+    }
+
+    /// The cloud (with intensities when every sweep has them) and the sources of the
+    /// candidates within the range and elevation limits and not mixed pixels, counting
+    /// the dropped ones.
+    fn points(
+        &self,
+        cand: Vec<Candidate>,
+        mixed: Option<Vec<bool>>,
+        stats: &mut ConvertStats,
+    ) -> Result<(PointCloud, Vec<[u32; 2]>)> {
+        let (params, cols, with_intensity) = (self.params, self.cols, self.with_intensity);
+        let mut cloud = PointCloud::with_capacity(cand.len());
+        let mut intensity = Vec::with_capacity(if with_intensity { cand.len() } else { 0 });
+        let mut sources = Vec::with_capacity(cand.len());
+        for (k, i, p, v, _, alpha) in cand {
+            let s = &self.log.sweeps[k as usize];
+            let r = s.ranges[i as usize] as f64;
+            if r > self.max_range {
+                stats.beyond_max_range += 1;
                 continue;
             }
-        }
-        if let Some(m) = &mixed {
-            if m[k as usize * cols + i as usize] {
-                stats.mixed_pixels += 1;
+            if r < params.min_range {
+                stats.below_min_range += 1;
                 continue;
             }
+            if let Some((lo, hi)) = params.elevation_window {
+                let phi = MirrorGeometry::reflected_elevation(alpha).rem_euclid(TAU);
+                if !(phi >= lo && phi <= hi) {
+                    stats.outside_elevation += 1;
+                    continue;
+                }
+            }
+            if let Some(m) = &mixed {
+                if m[k as usize * cols + i as usize] {
+                    stats.mixed_pixels += 1;
+                    continue;
+                }
+            }
+            cloud.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+            if with_intensity {
+                intensity.push(v);
+            }
+            sources.push([k, i]);
         }
-        cloud.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
         if with_intensity {
-            intensity.push(v);
+            cloud.set_intensity(Some(intensity))?;
         }
-        sources.push([k, i]);
+        Ok((cloud, sources))
     }
-    if with_intensity {
-        cloud.set_intensity(Some(intensity))?;
-    }
-    stats.points = cloud.len();
-    Ok(ConvertedScan {
-        cloud,
-        sources,
-        stats,
-    })
 }
 
 fn check_sweep(s: &Sweep, k: usize, last_time: &mut f64) -> Result<()> {

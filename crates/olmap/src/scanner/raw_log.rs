@@ -209,132 +209,16 @@ impl MirrorLog {
 
     /// Reads a log (see the module documentation).
     pub fn read<R: BufRead>(reader: R) -> Result<Self, ParseError> {
-        let mut keys: Vec<(String, String, usize)> = Vec::new();
-        let mut header: Option<MirrorGeometry> = None;
-        let mut sweeps = Vec::new();
-        let mut events = Vec::new();
-        let mut seen_magic = false;
-        let mut last_time = f64::NEG_INFINITY;
-        for_each_line(reader, |n, line| {
-            let t = line.trim();
-            if !seen_magic {
-                if t != MAGIC {
-                    return Err(ParseError::line(
-                        n,
-                        format!("expected the first line '{MAGIC}', found '{t}'"),
-                    ));
-                }
-                seen_magic = true;
-                return Ok(());
-            }
-            if t.is_empty() {
-                return Ok(());
-            }
-            if let Some(rest) = t.strip_prefix('#') {
-                if header.is_none() {
-                    let mut it = rest.split_whitespace();
-                    if let (Some(k), Some(v), None) = (it.next(), it.next(), it.next()) {
-                        keys.push((k.to_string(), v.to_string(), n));
-                    }
-                }
-                return Ok(());
-            }
-            if header.is_none() {
-                header = Some(geometry_from_keys(&keys, n)?);
-            }
-            let fields: Vec<&str> = t.split_whitespace().collect();
-            let num = |k: usize, what: &str| -> Result<f64, ParseError> {
-                let s = fields.get(k).ok_or_else(|| {
-                    ParseError::line(n, format!("missing {what} (field {})", k + 1))
-                })?;
-                s.parse::<f64>()
-                    .map_err(|_| ParseError::line(n, format!("{what} is not a number: '{s}'")))
-            };
-            let time = num(1, "time")?;
-            if !time.is_finite() {
-                return Err(ParseError::line(n, "time must be finite"));
-            }
-            if time < last_time {
-                return Err(ParseError::line(
-                    n,
-                    format!("time {time} is before the previous record's {last_time}"),
-                ));
-            }
-            last_time = time;
-            match fields[0] {
-                "S" => {
-                    let duration = num(2, "duration")?;
-                    let angle_min = num(3, "start angle")?;
-                    let angle_step = num(4, "angle step")?;
-                    let count = fields.get(5).and_then(|s| s.parse::<usize>().ok());
-                    let count = count
-                        .ok_or_else(|| ParseError::line(n, "field 6 must be the beam count"))?;
-                    let rest = &fields[6..];
-                    let with_int = if rest.len() == count {
-                        false
-                    } else if rest.len() == 2 * count {
-                        true
-                    } else {
-                        return Err(ParseError::line(
-                            n,
-                            format!(
-                                "a sweep of {count} beams needs {count} ranges or {} ranges and intensities, found {} values",
-                                2 * count,
-                                rest.len()
-                            ),
-                        ));
-                    };
-                    let mut vals = Vec::with_capacity(rest.len());
-                    for (k, s) in rest.iter().enumerate() {
-                        let v = s.parse::<f32>().map_err(|_| {
-                            ParseError::line(n, format!("value {} is not a number: '{s}'", k + 1))
-                        })?;
-                        vals.push(v);
-                    }
-                    let intensities = with_int.then(|| vals.split_off(count));
-                    sweeps.push(Sweep {
-                        time,
-                        duration,
-                        angle_min,
-                        angle_step,
-                        ranges: vals,
-                        intensities,
-                    });
-                }
-                "E" => {
-                    let kind = match (fields.get(2).copied(), fields.len()) {
-                        (Some("tick"), 3) => MirrorEventKind::Tick,
-                        (Some("trigger"), 3) => MirrorEventKind::Trigger,
-                        _ => {
-                            return Err(ParseError::line(
-                                n,
-                                "an event is 'E time tick' or 'E time trigger'",
-                            ))
-                        }
-                    };
-                    events.push(MirrorEvent { time, kind });
-                }
-                other => {
-                    return Err(ParseError::line(
-                        n,
-                        format!("unknown record '{other}': expected S (sweep) or E (event)"),
-                    ))
-                }
-            }
-            Ok(())
-        })?;
-        if !seen_magic {
-            return Err(ParseError::Empty);
-        }
-        let header = match header {
-            Some(h) => h,
-            None => geometry_from_keys(&keys, 0)?,
+        let mut state = LogReader {
+            keys: Vec::new(),
+            header: None,
+            sweeps: Vec::new(),
+            events: Vec::new(),
+            seen_magic: false,
+            last_time: f64::NEG_INFINITY,
         };
-        Ok(MirrorLog {
-            header,
-            sweeps,
-            events,
-        })
+        for_each_line(reader, |n, line| state.line(n, line))?;
+        state.finish()
     }
 
     /// Writes the log to a file atomically.
@@ -346,6 +230,163 @@ impl MirrorLog {
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
         crate::file::parse_file(path.as_ref(), FORMAT, Self::read)
     }
+}
+
+/// What [`MirrorLog::read`] has read so far.
+struct LogReader {
+    /// The header's `key value` pairs with their line numbers.
+    keys: Vec<(String, String, usize)>,
+    /// The geometry, once the first record has ended the header.
+    header: Option<MirrorGeometry>,
+    sweeps: Vec<Sweep>,
+    events: Vec<MirrorEvent>,
+    /// Whether the first line (the magic) has been read.
+    seen_magic: bool,
+    /// The previous record's time.
+    last_time: f64,
+}
+
+impl LogReader {
+    /// Reads line `n`: the magic, a header or comment line, a blank line or a record.
+    fn line(&mut self, n: usize, line: &str) -> Result<(), ParseError> {
+        let t = line.trim();
+        if !self.seen_magic {
+            if t != MAGIC {
+                return Err(ParseError::line(
+                    n,
+                    format!("expected the first line '{MAGIC}', found '{t}'"),
+                ));
+            }
+            self.seen_magic = true;
+            return Ok(());
+        }
+        if t.is_empty() {
+            return Ok(());
+        }
+        if let Some(rest) = t.strip_prefix('#') {
+            if self.header.is_none() {
+                let mut it = rest.split_whitespace();
+                if let (Some(k), Some(v), None) = (it.next(), it.next(), it.next()) {
+                    self.keys.push((k.to_string(), v.to_string(), n));
+                }
+            }
+            return Ok(());
+        }
+        if self.header.is_none() {
+            self.header = Some(geometry_from_keys(&self.keys, n)?);
+        }
+        self.record(n, t)
+    }
+
+    /// Reads the record `t` on line `n`: a sweep or an event, in time order.
+    fn record(&mut self, n: usize, t: &str) -> Result<(), ParseError> {
+        let fields: Vec<&str> = t.split_whitespace().collect();
+        let time = number(&fields, n, 1, "time")?;
+        if !time.is_finite() {
+            return Err(ParseError::line(n, "time must be finite"));
+        }
+        if time < self.last_time {
+            return Err(ParseError::line(
+                n,
+                format!(
+                    "time {time} is before the previous record's {}",
+                    self.last_time
+                ),
+            ));
+        }
+        self.last_time = time;
+        match fields[0] {
+            "S" => self.sweeps.push(sweep_record(&fields, n, time)?),
+            "E" => self.events.push(event_record(&fields, n, time)?),
+            other => {
+                return Err(ParseError::line(
+                    n,
+                    format!("unknown record '{other}': expected S (sweep) or E (event)"),
+                ))
+            }
+        }
+        Ok(())
+    }
+
+    /// The log, once every line is read.
+    fn finish(self) -> Result<MirrorLog, ParseError> {
+        if !self.seen_magic {
+            return Err(ParseError::Empty);
+        }
+        let header = match self.header {
+            Some(h) => h,
+            None => geometry_from_keys(&self.keys, 0)?,
+        };
+        Ok(MirrorLog {
+            header,
+            sweeps: self.sweeps,
+            events: self.events,
+        })
+    }
+}
+
+/// Field `k` of the record on line `n`, a number (`what` names it in errors).
+fn number(fields: &[&str], n: usize, k: usize, what: &str) -> Result<f64, ParseError> {
+    let s = fields
+        .get(k)
+        .ok_or_else(|| ParseError::line(n, format!("missing {what} (field {})", k + 1)))?;
+    s.parse::<f64>()
+        .map_err(|_| ParseError::line(n, format!("{what} is not a number: '{s}'")))
+}
+
+/// The sweep of the `S` record `fields` on line `n`, at `time`.
+fn sweep_record(fields: &[&str], n: usize, time: f64) -> Result<Sweep, ParseError> {
+    let duration = number(fields, n, 2, "duration")?;
+    let angle_min = number(fields, n, 3, "start angle")?;
+    let angle_step = number(fields, n, 4, "angle step")?;
+    let count = fields.get(5).and_then(|s| s.parse::<usize>().ok());
+    let count = count.ok_or_else(|| ParseError::line(n, "field 6 must be the beam count"))?;
+    let rest = &fields[6..];
+    let with_int = if rest.len() == count {
+        false
+    } else if rest.len() == 2 * count {
+        true
+    } else {
+        return Err(ParseError::line(
+            n,
+            format!(
+                "a sweep of {count} beams needs {count} ranges or {} ranges and intensities, found {} values",
+                2 * count,
+                rest.len()
+            ),
+        ));
+    };
+    let mut vals = Vec::with_capacity(rest.len());
+    for (k, s) in rest.iter().enumerate() {
+        let v = s
+            .parse::<f32>()
+            .map_err(|_| ParseError::line(n, format!("value {} is not a number: '{s}'", k + 1)))?;
+        vals.push(v);
+    }
+    let intensities = with_int.then(|| vals.split_off(count));
+    Ok(Sweep {
+        time,
+        duration,
+        angle_min,
+        angle_step,
+        ranges: vals,
+        intensities,
+    })
+}
+
+/// The event of the `E` record `fields` on line `n`, at `time`.
+fn event_record(fields: &[&str], n: usize, time: f64) -> Result<MirrorEvent, ParseError> {
+    let kind = match (fields.get(2).copied(), fields.len()) {
+        (Some("tick"), 3) => MirrorEventKind::Tick,
+        (Some("trigger"), 3) => MirrorEventKind::Trigger,
+        _ => {
+            return Err(ParseError::line(
+                n,
+                "an event is 'E time tick' or 'E time trigger'",
+            ))
+        }
+    };
+    Ok(MirrorEvent { time, kind })
 }
 
 /// Builds the geometry from the header's `key value` pairs; `line` is the first record's
