@@ -1,19 +1,11 @@
 //! `olmap grid2d`: build a 2D occupancy grid from planar laser scans and write it as a ROS
 //! map (PGM + YAML).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
-use anyhow::{bail, Context};
 use clap::Args;
-use olmap::cloud::LaserScan;
-use olmap::geometry::PoseList;
-use olmap::grid2d::{
-    write_ros_map, CellsReport, ExtentReport, Grid2dReport, OccupancyGrid2d, SensorModel2d,
-    Thresholds,
-};
-use olmap::occupancy::PositionBuckets;
+use olmap::grid2d::{run_grid2d, Grid2dJob, SensorModel2d};
 
 /// Arguments of `olmap grid2d`.
 ///
@@ -63,16 +55,6 @@ pub struct Grid2dArgs {
 
 /// Runs the command.
 pub fn run(a: &Grid2dArgs) -> anyhow::Result<ExitCode> {
-    let start = Instant::now();
-    if a.output.extension().and_then(|e| e.to_str()) != Some("pgm") {
-        bail!(
-            "{}: the output must be a .pgm image (the .yaml is written beside it)",
-            a.output.display()
-        );
-    }
-    let list = PoseList::read_path(&a.poses)?;
-    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned());
-    let name = |p: &Path| p.file_name().map(|s| s.to_string_lossy().into_owned());
     let d = SensorModel2d::default();
     let model = SensorModel2d::from_probabilities(
         a.hit,
@@ -81,84 +63,41 @@ pub fn run(a: &Grid2dArgs) -> anyhow::Result<ExitCode> {
         SensorModel2d::probability(d.l_max),
         a.max_range,
     )?;
-    let mut grid = OccupancyGrid2d::new(a.resolution)?;
-    let mut buckets = PositionBuckets::new(a.bucket_radius)?;
-    let (mut integrated, mut skipped) = (0usize, 0usize);
-    let (mut beams, mut hits, mut cells_traversed) = (0usize, 0usize, 0usize);
-    for path in &a.scans {
-        let pose = stem(path)
-            .and_then(|s| list.get(&s))
-            .or_else(|| name(path).and_then(|n| list.get(&n)))
-            .with_context(|| {
-                format!(
-                    "{}: no pose named '{}' in {}",
-                    path.display(),
-                    stem(path).unwrap_or_default(),
-                    a.poses.display()
-                )
-            })?;
-        let scan = LaserScan::read_csv_path(path)?;
-        match grid
-            .insert_scan_bucketed(&scan, pose, &model, &mut buckets)
-            .with_context(|| path.display().to_string())?
-        {
-            Some(s) => {
-                integrated += 1;
-                beams += s.beams;
-                hits += s.hits;
-                cells_traversed += s.cells_traversed;
-            }
-            None => skipped += 1,
-        }
-    }
-    let map = grid.to_trinary(Thresholds::default());
-    let yaml = write_ros_map(&a.output, &map)?;
-    let seconds = start.elapsed().as_secs_f64();
-    let c = map.counts();
-    let ((x0, y0), (x1, y1)) = grid.extent();
+    let run = run_grid2d(&Grid2dJob {
+        scans: a.scans.clone(),
+        poses: a.poses.clone(),
+        output: a.output.clone(),
+        resolution: a.resolution,
+        bucket_radius: a.bucket_radius,
+        model,
+    })?;
+    let r = &run.report;
     if a.json {
-        let v = Grid2dReport {
-            output: a.output.display().to_string(),
-            yaml: yaml.display().to_string(),
-            scans: a.scans.len(),
-            scans_integrated: integrated,
-            scans_skipped_by_buckets: skipped,
-            beams,
-            hits,
-            cells_traversed,
-            resolution: a.resolution,
-            width: map.width,
-            height: map.height,
-            origin: map.origin,
-            extent: ExtentReport {
-                min: [x0, y0],
-                max: [x1, y1],
-            },
-            cells: CellsReport::from(c),
-            seconds,
-        };
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(r)?);
     } else {
         println!(
-            "{} scans ({integrated} integrated) -> {} x {} cells at {} m in {:.2} s -> {} + {}",
-            a.scans.len(),
-            map.width,
-            map.height,
-            a.resolution,
-            seconds,
+            "{} scans ({} integrated) -> {} x {} cells at {} m in {:.2} s -> {} + {}",
+            r.scans,
+            r.scans_integrated,
+            r.width,
+            r.height,
+            r.resolution,
+            r.seconds,
             a.output.display(),
-            yaml.display()
+            r.yaml
         );
-        if skipped > 0 {
+        if r.scans_skipped_by_buckets > 0 {
             println!(
-                "  {skipped} scans skipped: taken within {} m of an earlier one",
-                a.bucket_radius
+                "  {} scans skipped: taken within {} m of an earlier one",
+                r.scans_skipped_by_buckets, a.bucket_radius
             );
         }
+        let c = &r.cells;
         println!(
             "  {:<10}{} free, {} occupied, {} unknown",
             "cells", c.free, c.occupied, c.unknown
         );
+        let ([x0, y0], [x1, y1]) = (r.extent.min, r.extent.max);
         println!(
             "  {:<10}x {x0:.3} .. {x1:.3} m, y {y0:.3} .. {y1:.3} m",
             "extent"

@@ -41,6 +41,7 @@
 pub mod buckets;
 pub mod grid;
 pub mod navigation;
+mod pipeline;
 pub mod raytrace;
 pub mod report;
 pub mod ros_map;
@@ -49,6 +50,7 @@ pub mod trinary;
 
 pub use grid::{InsertStats, OccupancyGrid2d};
 pub use navigation::{navigation_grid, NavGridParams};
+pub use pipeline::{run_grid2d, Grid2dJob, Grid2dRun};
 pub use raytrace::{bresenham, Bresenham};
 pub use report::{CellsReport, ExtentReport, Grid2dReport, NavgridReport};
 pub use ros_map::{read_ros_map, write_ros_map};
