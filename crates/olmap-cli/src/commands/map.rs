@@ -129,12 +129,7 @@ fn map_params(a: &MapArgs) -> anyhow::Result<MapParams> {
 /// Runs `olmap map`.
 pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
     set_threads(a.threads.threads)?;
-    if MapFormat::from_path(&a.output).is_none() {
-        bail!(
-            "{}: the output must be a map file (.olm or .bt)",
-            a.output.display()
-        );
-    }
+    MapFormat::of_output(&a.output)?;
     let job = MapJob {
         scans: io::scan_files(&a.scans, a.list.as_deref())?,
         odometry: match a.odometry.as_deref() {

@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::bail;
 use clap::Args;
 use olmap::occupancy::{self, MapFormat};
 
@@ -20,12 +19,7 @@ pub struct MergeArgs {
 
 /// Runs `olmap merge`.
 pub fn run(a: &MergeArgs) -> anyhow::Result<ExitCode> {
-    if MapFormat::from_path(&a.output).is_none() {
-        bail!(
-            "{}: the output must be a map file (.olm or .bt)",
-            a.output.display()
-        );
-    }
+    MapFormat::of_output(&a.output)?;
     let mut it = a.maps.iter();
     let first = it.next().expect("clap requires two maps");
     let mut map = occupancy::read_map(first)?.map;

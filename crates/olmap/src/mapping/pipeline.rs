@@ -53,12 +53,7 @@ pub struct MapRun {
 /// writes every requested output atomically. Errors name the file or scan at fault; an
 /// output that is not a map file is refused before anything is read.
 pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
-    if MapFormat::from_path(&job.output).is_none() {
-        return Err(Error::InvalidArgument(format!(
-            "{}: the output must be a map file (.olm or .bt)",
-            job.output.display()
-        )));
-    }
+    MapFormat::of_output(&job.output)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
     let mut params = job.params.clone();

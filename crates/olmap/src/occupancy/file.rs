@@ -26,6 +26,18 @@ impl MapFormat {
         }
     }
 
+    /// The format of an output map path, or [`Error::InvalidArgument`] naming the path
+    /// when its extension is neither `.olm` nor `.bt`: what every writer of a map checks
+    /// before doing any work.
+    pub fn of_output(path: &Path) -> Result<Self> {
+        Self::from_path(path).ok_or_else(|| {
+            Error::InvalidArgument(format!(
+                "{}: the output must be a map file (.olm or .bt)",
+                path.display()
+            ))
+        })
+    }
+
     /// A short human name.
     pub fn name(self) -> &'static str {
         match self {

@@ -100,12 +100,7 @@ pub struct VoxelizeRun {
 /// map file is refused before anything is read; an error inserting a cloud names it.
 pub fn run_voxelize(job: &VoxelizeJob, progress: Progress<'_>) -> Result<VoxelizeRun> {
     let start = Instant::now();
-    if MapFormat::from_path(&job.output).is_none() {
-        return Err(Error::InvalidArgument(format!(
-            "{}: the output must be a map file (.olm or .bt)",
-            job.output.display()
-        )));
-    }
+    MapFormat::of_output(&job.output)?;
     let poses = cloud_poses(&job.poses, &job.clouds)?;
     let mut map = OccupancyList::new(job.resolution)?;
     let mut total = InsertStats::default();
