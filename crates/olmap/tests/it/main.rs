@@ -5,6 +5,7 @@ mod align_exact;
 mod align_synthetic;
 mod bad_input;
 mod beacon;
+mod data_safety;
 mod fuzz;
 mod grid2d;
 mod layers;
