@@ -15,6 +15,14 @@ impl<'a> ByteCursor<'a> {
         ByteCursor { data, pos: 0 }
     }
 
+    /// A cursor over `data` starting at byte `pos` (positions stay those of `data`).
+    pub fn new_at(data: &'a [u8], pos: usize) -> Self {
+        ByteCursor {
+            data,
+            pos: pos.min(data.len()),
+        }
+    }
+
     /// Bytes consumed so far.
     pub fn pos(&self) -> usize {
         self.pos

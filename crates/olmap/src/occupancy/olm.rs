@@ -1,21 +1,33 @@
 //! `.olm`: olmap's own compact binary file for occupancy lists.
 //!
-//! Layout, all integers little-endian:
+//! Layout (version 2), all integers little-endian:
 //! ```text
 //! magic       8 bytes   "OLMAP\0\r\n"   (the CR LF catches text-mode transfers)
-//! version     u32       1
+//! version     u32       2
 //! resolution  f64       voxel edge in metres, finite and > 0
 //! voxels      u64       number of stored voxels
-//! keys        voxels x LEB128 varint: the packed keys in ascending order, each stored as
-//!                       the difference from the previous one (the first from 0)
-//! counts      voxels x LEB128 varint: the count of each voxel, 1..=1023, in key order
-//! crc32       u32       CRC-32 (IEEE) of every byte before it
+//! chunk       u32       voxels per chunk (>= 1; the last chunk may hold fewer)
+//! header crc  u32       CRC-32 (IEEE) of every byte before it
+//! then ceil(voxels / chunk) chunks, each:
+//!   length    u32       bytes of the payload
+//!   payload   keys      the chunk's voxels' packed keys in ascending order as LEB128
+//!                       varints, each the difference from the previous key in the file
+//!                       (the very first from 0)
+//!             counts    the count of each of the chunk's voxels, 1..=1023, as varints
+//!   crc       u32       CRC-32 (IEEE) of the length and the payload
 //! ```
 //! A packed key is `((x + 2^17) << 36) | ((y + 2^17) << 18) | (z + 2^17)`: sorted packed keys
 //! walk along z first, so most differences are small and take one or two bytes; counts
-//! are mostly 1-2 and take one byte. A file of a scan is about 3-5 bytes per voxel.
-//! Saving then loading gives back exactly the same list; nothing after the checksum is
-//! allowed.
+//! are mostly 1-2 and take one byte. A file of a scan is about 3-5 bytes per voxel; the
+//! chunks (1024 voxels each as written) add 8 bytes per chunk. Saving then loading gives
+//! back exactly the same list; nothing after the last chunk is allowed.
+//!
+//! The checksums per chunk locate damage: a damaged file is refused with the byte offset
+//! of the damaged chunk (or header), its index and the voxels it held.
+//!
+//! Version 1 (still read, no longer written): the same header up to `voxels`, then all the
+//! keys, all the counts, and one CRC-32 of every byte before it; a damaged file is refused
+//! but the damage cannot be located.
 
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -24,12 +36,18 @@ use super::list::{check_resolution, OccupancyList};
 use super::packed::{entry_count, entry_key, MAX_COUNT};
 use super::table::VoxelTable;
 use crate::error::{Location, ParseError, Result};
-use crate::file::crc32::Crc32;
+use crate::file::crc32::crc32;
 use crate::file::cursor::ByteCursor;
 
 /// The 8 bytes every `.olm` file starts with.
 pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
-const VERSION: u32 = 1;
+/// The `.olm` version this olmap writes (it reads versions 1 and 2).
+pub const OLM_VERSION: u32 = 2;
+const VERSION_1: u32 = 1;
+/// Voxels per chunk as written.
+const CHUNK_VOXELS: usize = 1024;
+/// The most bytes a varint takes.
+const MAX_VARINT: u64 = 10;
 const MAX_PACKED_KEY: u64 = (1 << 54) - 1;
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
@@ -40,31 +58,212 @@ fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
+/// Reads `n` keys as varint differences, continuing from `key`; `base` is the index of
+/// the first of them in the file (for messages).
+fn read_keys(
+    r: &mut ByteCursor<'_>,
+    n: usize,
+    key: &mut u64,
+    base: usize,
+    keys: &mut Vec<u64>,
+) -> Result<(), ParseError> {
+    for i in 0..n {
+        let at = r.pos() as u64;
+        let d = r.varint("key")?;
+        if base + i > 0 && d == 0 {
+            return Err(ParseError::at(
+                Location::Byte(at),
+                "keys are not strictly increasing",
+            ));
+        }
+        *key = key
+            .checked_add(d)
+            .filter(|&k| k <= MAX_PACKED_KEY)
+            .ok_or_else(|| {
+                ParseError::at(Location::Byte(at), "key outside the representable range")
+            })?;
+        keys.push(*key);
+    }
+    Ok(())
+}
+
+/// Reads one count per key into `table`.
+fn read_counts(
+    r: &mut ByteCursor<'_>,
+    keys: &[u64],
+    table: &mut VoxelTable,
+) -> Result<(), ParseError> {
+    for &k in keys {
+        let at = r.pos() as u64;
+        let c = r.varint("count")?;
+        if c == 0 || c > MAX_COUNT as u64 {
+            return Err(ParseError::at(
+                Location::Byte(at),
+                format!("count {c} outside 1..={MAX_COUNT}"),
+            ));
+        }
+        table.update(k, |_| c as u16);
+    }
+    Ok(())
+}
+
+/// Version 1: all keys, all counts, one checksum of the whole file.
+fn read_v1(data: &[u8], r: &mut ByteCursor<'_>, n: u64) -> Result<VoxelTable, ParseError> {
+    // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
+    if n.saturating_mul(2) > r.remaining() as u64 {
+        return Err(ParseError::Truncated(format!(
+            "{n} voxels announced but only {} bytes follow",
+            r.remaining()
+        )));
+    }
+    let n = n as usize;
+    let mut keys = Vec::with_capacity(n);
+    read_keys(r, n, &mut 0, 0, &mut keys)?;
+    let mut table = VoxelTable::with_capacity(n);
+    read_counts(r, &keys, &mut table)?;
+    let body_end = r.pos();
+    let stored = r.u32("checksum")?;
+    let computed = crc32(&data[..body_end]);
+    if computed != stored {
+        return Err(ParseError::Malformed(format!(
+            "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is \
+             damaged somewhere (a version-1 .olm has one checksum for the whole file)"
+        )));
+    }
+    if r.remaining() != 0 {
+        return Err(ParseError::Malformed(format!(
+            "{} unexpected bytes after the checksum",
+            r.remaining()
+        )));
+    }
+    Ok(table)
+}
+
+/// Version 2: the header's checksum, then chunk by chunk, each with its own checksum.
+fn read_v2<'a>(
+    data: &'a [u8],
+    r: &mut ByteCursor<'a>,
+    n: u64,
+    resolution: f64,
+) -> Result<VoxelTable, ParseError> {
+    let chunk = r.u32("chunk size")? as u64;
+    let header_end = r.pos();
+    let stored = r.u32("header checksum")?;
+    let computed = crc32(&data[..header_end]);
+    if computed != stored {
+        return Err(ParseError::at(
+            Location::Byte(0),
+            format!(
+                "the header (bytes 0..{}) is damaged: checksum mismatch (stored {stored:08x}, \
+                 computed {computed:08x})",
+                r.pos()
+            ),
+        ));
+    }
+    check_resolution(resolution).map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
+    if chunk == 0 && n > 0 {
+        return Err(ParseError::at(Location::Byte(28), "chunk size 0"));
+    }
+    // Per voxel at least two bytes, per chunk eight: refuse counts the file cannot hold.
+    let chunks = if n == 0 { 0 } else { n.div_ceil(chunk) };
+    let need = n.saturating_mul(2).saturating_add(chunks.saturating_mul(8));
+    if need > r.remaining() as u64 {
+        return Err(ParseError::Truncated(format!(
+            "{n} voxels in {chunks} chunks announced but only {} bytes follow",
+            r.remaining()
+        )));
+    }
+    let n = n as usize;
+    let mut keys = Vec::with_capacity((chunk as usize).min(n));
+    let mut table = VoxelTable::with_capacity(n);
+    let mut key = 0u64;
+    for c in 0..chunks as usize {
+        let first = c * chunk as usize;
+        let m = (chunk as usize).min(n - first);
+        let start = r.pos();
+        let voxels = format!("voxels {first}..{}", first + m);
+        let len = r.u32("chunk length")? as u64;
+        let (lo, hi) = (2 * m as u64, 2 * MAX_VARINT * m as u64);
+        if len < lo || len > hi || len + 4 > r.remaining() as u64 {
+            let reason = if len + 4 > r.remaining() as u64 {
+                format!("its length {len} runs past the end of the file (cut short, or damaged)")
+            } else {
+                format!("its length {len} is impossible for {m} voxels")
+            };
+            return Err(ParseError::at(
+                Location::Byte(start as u64),
+                format!("chunk {c} ({voxels}) is damaged: {reason}"),
+            ));
+        }
+        let end = start + 4 + len as usize;
+        let stored = u32::from_le_bytes(data[end..end + 4].try_into().expect("4 bytes"));
+        if crc32(&data[start..end]) != stored {
+            return Err(ParseError::at(
+                Location::Byte(start as u64),
+                format!(
+                    "chunk {c} ({voxels}, bytes {start}..{}) is damaged: checksum mismatch",
+                    end + 4
+                ),
+            ));
+        }
+        let mut body = ByteCursor::new_at(&data[..end], start + 4);
+        keys.clear();
+        read_keys(&mut body, m, &mut key, first, &mut keys)?;
+        read_counts(&mut body, &keys, &mut table)?;
+        if body.remaining() != 0 {
+            return Err(ParseError::at(
+                Location::Byte(body.pos() as u64),
+                format!(
+                    "chunk {c}: {} bytes left over after its voxels",
+                    body.remaining()
+                ),
+            ));
+        }
+        *r = ByteCursor::new_at(data, end + 4);
+    }
+    if r.remaining() != 0 {
+        return Err(ParseError::at(
+            Location::Byte(r.pos() as u64),
+            format!("{} unexpected bytes after the last chunk", r.remaining()),
+        ));
+    }
+    Ok(table)
+}
+
 impl OccupancyList {
-    /// Writes the list as `.olm`.
+    /// Writes the list as `.olm` (version 2).
     pub fn write_olm<W: Write>(&self, mut w: W) -> std::io::Result<()> {
         let mut entries: Vec<u64> = self.table.entries().collect();
         entries.sort_unstable();
-        let mut out = Vec::with_capacity(32 + entries.len() * 4);
+        let mut out = Vec::with_capacity(40 + entries.len() * 4);
         out.extend_from_slice(OLM_MAGIC);
-        out.extend_from_slice(&VERSION.to_le_bytes());
+        out.extend_from_slice(&OLM_VERSION.to_le_bytes());
         out.extend_from_slice(&self.resolution().to_le_bytes());
         out.extend_from_slice(&(entries.len() as u64).to_le_bytes());
+        out.extend_from_slice(&(CHUNK_VOXELS as u32).to_le_bytes());
+        let crc = crc32(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
         let mut prev = 0u64;
-        for &e in &entries {
-            put_varint(&mut out, entry_key(e) - prev);
-            prev = entry_key(e);
+        for chunk in entries.chunks(CHUNK_VOXELS) {
+            let start = out.len();
+            out.extend_from_slice(&[0; 4]);
+            for &e in chunk {
+                put_varint(&mut out, entry_key(e) - prev);
+                prev = entry_key(e);
+            }
+            for &e in chunk {
+                put_varint(&mut out, entry_count(e) as u64);
+            }
+            let len = (out.len() - start - 4) as u32;
+            out[start..start + 4].copy_from_slice(&len.to_le_bytes());
+            let crc = crc32(&out[start..]);
+            out.extend_from_slice(&crc.to_le_bytes());
         }
-        for &e in &entries {
-            put_varint(&mut out, entry_count(e) as u64);
-        }
-        let mut crc = Crc32::default();
-        crc.update(&out);
-        out.extend_from_slice(&crc.finish().to_le_bytes());
         w.write_all(&out)
     }
 
-    /// Reads a `.olm` stream.
+    /// Reads a `.olm` stream (version 2, or the older version 1). Damage is refused with
+    /// its byte offset: the damaged chunk (index, voxels, bytes) or the header.
     pub fn read_olm<R: BufRead>(mut reader: R) -> Result<OccupancyList, ParseError> {
         let mut data = Vec::new();
         reader.read_to_end(&mut data)?;
@@ -79,70 +278,20 @@ impl OccupancyList {
             ));
         }
         let version = r.u32("version")?;
-        if version != VERSION {
+        if version != OLM_VERSION && version != VERSION_1 {
             return Err(ParseError::Unsupported(format!(
-                ".olm version {version} (this reader knows {VERSION})"
+                ".olm version {version} (this reader knows {VERSION_1} and {OLM_VERSION})"
             )));
         }
         let resolution = r.f64("resolution")?;
-        check_resolution(resolution)
-            .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
         let n = r.u64("voxel count")?;
-        // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
-        if n.saturating_mul(2) > r.remaining() as u64 {
-            return Err(ParseError::Truncated(format!(
-                "{n} voxels announced but only {} bytes follow",
-                r.remaining()
-            )));
-        }
-        let n = n as usize;
-        let mut keys = Vec::with_capacity(n);
-        let mut key = 0u64;
-        for i in 0..n {
-            let at = r.pos() as u64;
-            let d = r.varint("key")?;
-            if i > 0 && d == 0 {
-                return Err(ParseError::at(
-                    Location::Byte(at),
-                    "keys are not strictly increasing",
-                ));
-            }
-            key = key
-                .checked_add(d)
-                .filter(|&k| k <= MAX_PACKED_KEY)
-                .ok_or_else(|| {
-                    ParseError::at(Location::Byte(at), "key outside the representable range")
-                })?;
-            keys.push(key);
-        }
-        let mut table = VoxelTable::with_capacity(n);
-        for &k in &keys {
-            let at = r.pos() as u64;
-            let c = r.varint("count")?;
-            if c == 0 || c > MAX_COUNT as u64 {
-                return Err(ParseError::at(
-                    Location::Byte(at),
-                    format!("count {c} outside 1..={MAX_COUNT}"),
-                ));
-            }
-            table.update(k, |_| c as u16);
-        }
-        let body_end = r.pos();
-        let stored = r.u32("checksum")?;
-        let mut crc = Crc32::default();
-        crc.update(&data[..body_end]);
-        if crc.finish() != stored {
-            return Err(ParseError::Malformed(format!(
-                "checksum mismatch (stored {stored:08x}, computed {:08x}): the file is damaged",
-                crc.finish()
-            )));
-        }
-        if r.remaining() != 0 {
-            return Err(ParseError::Malformed(format!(
-                "{} unexpected bytes after the checksum",
-                r.remaining()
-            )));
-        }
+        let table = if version == VERSION_1 {
+            check_resolution(resolution)
+                .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
+            read_v1(&data, &mut r, n)?
+        } else {
+            read_v2(&data, &mut r, n, resolution)?
+        };
         let mut list = OccupancyList::new(resolution).expect("checked");
         list.table = table;
         Ok(list)
@@ -214,5 +363,101 @@ mod tests {
         let mut longer = buf.clone();
         longer.push(0);
         assert!(OccupancyList::read_olm(&longer[..]).is_err());
+    }
+
+    /// The version-1 bytes of a list (the old writer, for the reader's sake).
+    fn v1_bytes(l: &OccupancyList) -> Vec<u8> {
+        let mut entries: Vec<u64> = l.table.entries().collect();
+        entries.sort_unstable();
+        let mut out = Vec::new();
+        out.extend_from_slice(OLM_MAGIC);
+        out.extend_from_slice(&1u32.to_le_bytes());
+        out.extend_from_slice(&l.resolution().to_le_bytes());
+        out.extend_from_slice(&(entries.len() as u64).to_le_bytes());
+        let mut prev = 0;
+        for &e in &entries {
+            put_varint(&mut out, entry_key(e) - prev);
+            prev = entry_key(e);
+        }
+        for &e in &entries {
+            put_varint(&mut out, entry_count(e) as u64);
+        }
+        let crc = crc32(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
+        out
+    }
+
+    /// A list of `n` voxels along a line, counts 1..=7.
+    fn line(n: i32) -> OccupancyList {
+        let mut l = OccupancyList::new(0.1).unwrap();
+        for i in 0..n {
+            l.set(
+                VoxelKey::new(i % 300 - 150, i / 300, (i * 7) % 11),
+                (i % 7 + 1) as u16,
+            )
+            .unwrap();
+        }
+        l
+    }
+
+    #[test]
+    fn version_1_files_still_read() {
+        for l in [sample(), line(3000), OccupancyList::new(0.2).unwrap()] {
+            let back = OccupancyList::read_olm(&v1_bytes(&l)[..]).unwrap();
+            assert_eq!(back, l);
+        }
+        let mut bad = v1_bytes(&sample());
+        let last = bad.len() - 6;
+        bad[last] ^= 1;
+        let err = OccupancyList::read_olm(&bad[..]).unwrap_err().to_string();
+        assert!(err.contains("checksum"), "{err}");
+    }
+
+    #[test]
+    fn audit_damaged_map_is_refused_with_the_offset() {
+        // 3000 voxels: three chunks (1024, 1024, 952).
+        let l = line(3000);
+        let mut buf = Vec::new();
+        l.write_olm(&mut buf).unwrap();
+        assert_eq!(OccupancyList::read_olm(&buf[..]).unwrap(), l);
+        // Find the chunks: header 36 bytes, then length-prefixed chunks.
+        let mut starts = Vec::new();
+        let mut pos = 36;
+        while pos < buf.len() {
+            starts.push(pos);
+            let len = u32::from_le_bytes(buf[pos..pos + 4].try_into().unwrap()) as usize;
+            pos += 4 + len + 4;
+        }
+        assert_eq!(pos, buf.len());
+        assert_eq!(starts.len(), 3);
+        // One bad byte in the middle of the second chunk: refused, naming chunk 1, its
+        // voxels and the byte where it starts.
+        let mut bad = buf.clone();
+        bad[(starts[1] + starts[2]) / 2] ^= 0x40;
+        let err = OccupancyList::read_olm(&bad[..]).unwrap_err();
+        match &err {
+            ParseError::Invalid {
+                at: Location::Byte(b),
+                reason,
+            } => {
+                assert_eq!(*b as usize, starts[1]);
+                assert!(reason.contains("chunk 1 (voxels 1024..2048"), "{reason}");
+                assert!(reason.contains("checksum"), "{reason}");
+            }
+            e => panic!("not located: {e}"),
+        }
+        // The header, at byte 0.
+        let mut bad = buf.clone();
+        bad[20] ^= 1;
+        let err = OccupancyList::read_olm(&bad[..]).unwrap_err().to_string();
+        assert!(err.starts_with("byte 0: the header"), "{err}");
+        // Cut inside the last chunk.
+        let err = OccupancyList::read_olm(&buf[..buf.len() - 10])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(&format!("byte {}: chunk 2", starts[2])),
+            "{err}"
+        );
     }
 }
