@@ -1231,7 +1231,10 @@ fn audit_map_report_dir_checked_before_compute_cli() {
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("nodir") && err.contains("does not exist"), "{err}");
+    assert!(
+        err.contains("nodir") && err.contains("does not exist"),
+        "{err}"
+    );
     assert!(!map.exists() && !poses.exists());
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
@@ -1265,7 +1268,15 @@ fn store_info_merge_and_salvage() {
     let whole = small_store(2, 5);
     whole.robot_store(0).write(p("a.store")).unwrap();
     whole.robot_store(1).write(p("b.store")).unwrap();
-    let v = json(&olmap(&["store", "merge", &p("a.store"), &p("b.store"), "-o", &p("m.store"), "--json"]));
+    let v = json(&olmap(&[
+        "store",
+        "merge",
+        &p("a.store"),
+        &p("b.store"),
+        "-o",
+        &p("m.store"),
+        "--json",
+    ]));
     assert_eq!(v["records"], 10);
     assert_eq!(olmap::team::ScanStore::read(p("m.store")).unwrap(), whole);
     let v = json(&olmap(&["store", "info", &p("m.store"), "--json"]));
@@ -1287,10 +1298,22 @@ fn store_info_merge_and_salvage() {
     let start = v["damage"][0]["start"].as_u64().unwrap();
     let end = v["damage"][0]["end"].as_u64().unwrap();
     assert!(start <= mid as u64 && (mid as u64) < end, "{v}");
-    let v = json(&olmap(&["store", "salvage", &p("bad.store"), "-o", &p("fixed.store"), "--json"]));
+    let v = json(&olmap(&[
+        "store",
+        "salvage",
+        &p("bad.store"),
+        "-o",
+        &p("fixed.store"),
+        "--json",
+    ]));
     assert_eq!(v["records_recovered"], 9);
     assert_eq!(v["records_lost"], 1);
-    assert_eq!(olmap::team::ScanStore::read(p("fixed.store")).unwrap().len(), 9);
+    assert_eq!(
+        olmap::team::ScanStore::read(p("fixed.store"))
+            .unwrap()
+            .len(),
+        9
+    );
     // The strict readers refuse the damaged file with its offset; text output works too.
     let out = olmap(&["store", "merge", &p("bad.store"), "-o", &p("x.store")]);
     assert!(!out.status.success());

@@ -50,6 +50,12 @@ pub fn write_ros_map(pgm_path: impl AsRef<Path>, map: &TrinaryGrid) -> Result<Pa
     Ok(yaml)
 }
 
+/// Checks, before computing, that [`write_ros_map`] can write the image `pgm_path` and its
+/// YAML file (folders exist and are writable, neither is a folder).
+pub fn check_ros_map_output(pgm_path: &Path) -> Result<()> {
+    declare_ros_map(&mut OutputSet::new(), pgm_path)
+}
+
 /// Declares the image `pgm_path` and its YAML file in `set` (checked now).
 pub(crate) fn declare_ros_map(set: &mut OutputSet, pgm_path: &Path) -> Result<()> {
     set.file(pgm_path, PGM_FORMAT)?;

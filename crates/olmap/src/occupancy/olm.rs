@@ -393,7 +393,7 @@ mod tests {
         for i in 0..n {
             l.set(
                 VoxelKey::new(i % 300 - 150, i / 300, (i * 7) % 11),
-                (i % 7 + 1) as u16,
+                (i % 7 + 1) as u32,
             )
             .unwrap();
         }

@@ -291,6 +291,16 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
 /// same bytes.
 pub fn write_dataset(dir: impl AsRef<Path>, data: &super::SimDataset) -> Result<()> {
     let dir = dir.as_ref();
+    check_dataset_output(dir)?;
+    let mut set = OutputSet::new();
+    set.dir(dir, "dataset folder")?;
+    write_dataset_into(&set.path(dir)?, data)?;
+    set.commit()
+}
+
+/// Checks, before simulating, that [`write_dataset`] can write to `dir`: it does not exist
+/// or is empty, and its parent folder exists and is writable.
+pub fn check_dataset_output(dir: &Path) -> Result<()> {
     if dir.exists() {
         let empty = std::fs::read_dir(dir)
             .map_err(|e| Error::io(dir, e))?
@@ -303,10 +313,7 @@ pub fn write_dataset(dir: impl AsRef<Path>, data: &super::SimDataset) -> Result<
             )));
         }
     }
-    let mut set = OutputSet::new();
-    set.dir(dir, "dataset folder")?;
-    write_dataset_into(&set.path(dir)?, data)?;
-    set.commit()
+    OutputSet::new().dir(dir, "dataset folder")
 }
 
 /// Writes the dataset's files into the folder `dir` (existing or not), each atomically.
