@@ -1322,3 +1322,80 @@ fn store_info_merge_and_salvage() {
     let out = olmap(&["store", "info", &p("bad.store")]);
     assert!(String::from_utf8_lossy(&out.stdout).contains("DAMAGED"));
 }
+
+/// The names in `dir` a user sees (not hidden), sorted.
+fn visible_names(dir: &std::path::Path) -> Vec<String> {
+    let mut v: Vec<String> = match std::fs::read_dir(dir) {
+        Ok(entries) => entries
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.starts_with('.'))
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    v.sort();
+    v
+}
+
+#[test]
+fn audit_killed_run_leaves_no_partial_output() {
+    // A team run killed at any moment leaves its output folder with the complete set or
+    // nothing, never a part of it (the outputs are put in place together at the end).
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let sim = olmap(&[
+        "simulate",
+        "--robots",
+        "2",
+        "--scans-per-robot",
+        "3",
+        "--seed",
+        "4",
+        "--output",
+        data.to_str().unwrap(),
+    ]);
+    assert!(sim.status.success());
+    let complete = [
+        "report.html",
+        "report.json",
+        "solo",
+        "team.bt",
+        "team.olm",
+        "team.ply",
+        "team.store",
+        "team_poses.txt",
+    ];
+    for (i, delay_ms) in [100u64, 700, 2000, 5000].into_iter().enumerate() {
+        let out = dir.path().join(format!("out{i}"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_olmap"))
+            .args([
+                "team",
+                data.to_str().unwrap(),
+                "--solo",
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let names = visible_names(&out);
+        assert!(
+            names.is_empty() || names == complete,
+            "killed after {delay_ms} ms ({status}): {names:?}"
+        );
+    }
+    // Run to the end: the complete set.
+    let out = dir.path().join("whole");
+    let r = olmap(&[
+        "team",
+        data.to_str().unwrap(),
+        "--solo",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.status.success());
+    assert_eq!(visible_names(&out), complete);
+}
