@@ -333,7 +333,7 @@ impl OutputSet {
         for o in &self.outputs {
             if matches!(o.kind, Kind::File | Kind::Dir) {
                 let staged = self.staged_path(o);
-                if !staged.is_some_and(|p| p.symlink_metadata().is_ok()) {
+                if staged.is_none_or(|p| p.symlink_metadata().is_err()) {
                     return Err(write_error(
                         &o.declared,
                         o.format,
