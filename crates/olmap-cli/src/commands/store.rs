@@ -117,7 +117,7 @@ fn damage_lines(damage: &[StoreDamage]) -> String {
                 .record
                 .map_or_else(String::new, |i| format!(", from record {i}"));
             format!(
-                "  damaged: bytes {}..{} ({} bytes{record}, {} record markers): {}\n",
+                "  damaged: bytes {}..{} ({} bytes{record}; record markers in it: {}): {}\n",
                 d.start,
                 d.end,
                 d.end - d.start,
