@@ -6,6 +6,7 @@ mod align_synthetic;
 mod bad_input;
 mod beacon;
 mod fuzz;
+mod graph;
 mod grid2d;
 mod layers;
 mod mapping;
