@@ -14,6 +14,11 @@
 use std::collections::BTreeSet;
 
 use nalgebra::SMatrix;
+use rayon::prelude::*;
+
+/// Columns with at least this many off-diagonal blocks update the later columns in
+/// parallel (below it the work is too small to share).
+const PARALLEL_COLUMN: usize = 24;
 
 /// The block pattern of `L` for one graph structure and its elimination order.
 #[derive(Debug, Clone)]
@@ -220,6 +225,11 @@ fn lower_inverse<const B: usize>(l: &SMatrix<f64, B, B>) -> SMatrix<f64, B, B> {
 
 impl<const B: usize> Factor<B> {
     /// Factors `a` (consumed as the workspace). `None` when `a` is not positive definite.
+    ///
+    /// Column k's update of the later columns touches one column per row of column k, each
+    /// a different one: those updates run in parallel when the column is long. Every
+    /// block still receives its updates in the same order (column by column), so the
+    /// result does not depend on the thread count.
     pub fn new(sym: &Symbolic, a: BlockMatrix<B>) -> Option<Factor<B>> {
         let BlockMatrix { mut diag, mut off } = a;
         let n = sym.len();
@@ -232,24 +242,61 @@ impl<const B: usize> Factor<B> {
             for block in &mut off[s0..s1] {
                 *block *= linv_t;
             }
-            // Right-looking update of the later columns: A_rc -= L_rk L_ck^T.
-            for a in s0..s1 {
-                let ra = sym.rows[a];
-                let lak = off[a];
-                diag[ra] -= lak * lak.transpose();
-                // Column ra holds every row r_b (b > a) of column k: walk it in step.
-                let (mut p, end) = (sym.col_start[ra], sym.col_start[ra + 1]);
-                for b in a + 1..s1 {
-                    let rb = sym.rows[b];
-                    while p < end && sym.rows[p] < rb {
+            diag_inv.push(linv);
+            if s0 == s1 {
+                continue;
+            }
+            // Right-looking update of the later columns: A_rc -= L_rk L_ck^T. Split the
+            // storage into column k (read) and the target columns (written).
+            let (head, tail) = off.split_at_mut(s1);
+            let col_k = &head[s0..s1];
+            let rows_k = &sym.rows[s0..s1];
+            let mut targets = Vec::with_capacity(s1 - s0);
+            let mut rest = tail;
+            let mut offset = s1;
+            let (_, mut diag_rest) = diag.split_at_mut(k + 1);
+            let mut diag_offset = k + 1;
+            for &r in rows_k {
+                let (c0, c1) = (sym.col_start[r], sym.col_start[r + 1]);
+                let (_, after) = rest.split_at_mut(c0 - offset);
+                let (col, after) = after.split_at_mut(c1 - c0);
+                rest = after;
+                offset = c1;
+                let (_, d_after) = diag_rest.split_at_mut(r - diag_offset);
+                let (d, d_after) = d_after.split_at_mut(1);
+                diag_rest = d_after;
+                diag_offset = r + 1;
+                targets.push((r, &mut d[0], col));
+            }
+            let update = |a: usize,
+                          (r, d, col): (
+                usize,
+                &mut SMatrix<f64, B, B>,
+                &mut [SMatrix<f64, B, B>],
+            )| {
+                let lak_t = col_k[a].transpose();
+                *d -= col_k[a] * lak_t;
+                // Column r holds every row r_b (b > a) of column k: walk it in step.
+                let rows_r = &sym.rows[sym.col_start[r]..sym.col_start[r + 1]];
+                let mut p = 0;
+                for b in a + 1..rows_k.len() {
+                    let rb = rows_k[b];
+                    while rows_r[p] < rb {
                         p += 1;
                     }
-                    debug_assert!(p < end && sym.rows[p] == rb, "pattern not closed");
-                    let update = off[b] * lak.transpose();
-                    off[p] -= update;
+                    col[p] -= col_k[b] * lak_t;
+                }
+            };
+            if rows_k.len() >= PARALLEL_COLUMN {
+                targets
+                    .into_par_iter()
+                    .enumerate()
+                    .for_each(|(a, t)| update(a, t));
+            } else {
+                for (a, t) in targets.into_iter().enumerate() {
+                    update(a, t);
                 }
             }
-            diag_inv.push(linv);
         }
         Some(Factor { diag_inv, off })
     }
@@ -293,11 +340,59 @@ mod tests {
     use super::*;
     use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
-    /// A random-ish SPD block matrix on a graph with a cycle and a chord, solved by the
-    /// sparse factor and by a dense Cholesky.
+    /// An SPD block matrix on the graph `pairs`, solved by the sparse factor and by a dense
+    /// Cholesky; returns the sparse solution's largest difference and the longest column.
+    fn sparse_against_dense(n: usize, pairs: &[(usize, usize)], seed: u64) -> (f64, usize) {
+        let sym = Symbolic::new(n, pairs.iter().copied());
+        let mut a = BlockMatrix::<3>::zeros(&sym);
+        let mut dense = DMatrix::<f64>::zeros(3 * n, 3 * n);
+        let mut seed = seed;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        for &(i, j) in pairs {
+            // A sum of terms [M M^T + I, -M; -M^T, M^T M + I]-like blocks stays SPD.
+            let m = Matrix3::from_fn(|_, _| rnd());
+            let aii = m * m.transpose() + Matrix3::identity();
+            let ajj = m.transpose() * m + Matrix3::identity();
+            let aij = -m;
+            a.add_diag(&sym, i, &aii);
+            a.add_diag(&sym, j, &ajj);
+            a.add_off(sym.slot(i, j).unwrap(), &aij);
+            for r in 0..3 {
+                for c in 0..3 {
+                    dense[(3 * i + r, 3 * i + c)] += aii[(r, c)];
+                    dense[(3 * j + r, 3 * j + c)] += ajj[(r, c)];
+                    dense[(3 * i + r, 3 * j + c)] += aij[(r, c)];
+                    dense[(3 * j + c, 3 * i + r)] += aij[(r, c)];
+                }
+            }
+        }
+        let longest = (0..n)
+            .map(|k| sym.col_start[k + 1] - sym.col_start[k])
+            .max()
+            .unwrap();
+        let b: Vec<SMatrix<f64, 3, 1>> =
+            (0..n).map(|_| Vector3::new(rnd(), rnd(), rnd())).collect();
+        let f = Factor::new(&sym, a).expect("SPD");
+        let x = f.solve(&sym, &b);
+        let bd = DVector::from_iterator(3 * n, b.iter().flat_map(|v| v.iter().copied()));
+        let xd = dense.cholesky().expect("SPD").solve(&bd);
+        let mut worst = 0.0f64;
+        for v in 0..n {
+            for r in 0..3 {
+                worst = worst.max((x[v][r] - xd[3 * v + r]).abs() / (1.0 + xd[3 * v + r].abs()));
+            }
+        }
+        (worst, longest)
+    }
+
     #[test]
     fn sparse_block_cholesky_matches_dense_solve() {
-        let n = 9;
+        // A cycle with two chords (serial updates).
         let pairs = [
             (0, 1),
             (1, 2),
@@ -311,45 +406,27 @@ mod tests {
             (2, 6),
             (1, 7),
         ];
-        let sym = Symbolic::new(n, pairs);
-        let mut a = BlockMatrix::<3>::zeros(&sym);
-        let mut dense = DMatrix::<f64>::zeros(3 * n, 3 * n);
-        let mut seed = 7u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
-        for &(i, j) in &pairs {
-            let m = Matrix3::from_fn(|_, _| rnd());
-            // A_ij = -M, A_ii += M M^T + I-ish keeps it SPD (a graph Laplacian-like sum).
-            let aii = m * m.transpose() + Matrix3::identity();
-            let ajj = Matrix3::identity() * 1.0;
-            let aij = -m;
-            a.add_diag(&sym, i, &aii);
-            a.add_diag(&sym, j, &(ajj + m.transpose() * m));
-            a.add_off(sym.slot(i, j).unwrap(), &aij);
-            for r in 0..3 {
-                for c in 0..3 {
-                    dense[(3 * i + r, 3 * i + c)] += aii[(r, c)];
-                    dense[(3 * j + r, 3 * j + c)] += (ajj + m.transpose() * m)[(r, c)];
-                    dense[(3 * i + r, 3 * j + c)] += aij[(r, c)];
-                    dense[(3 * j + c, 3 * i + r)] += aij[(r, c)];
+        let (worst, _) = sparse_against_dense(9, &pairs, 7);
+        assert!(worst < 1e-10, "{worst}");
+        // A random graph with much fill: long columns take the parallel update.
+        let n = 80;
+        let mut pairs = Vec::new();
+        let mut s = 11u64;
+        for i in 0..n {
+            pairs.push((i, (i + 1) % n));
+            for _ in 0..3 {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let j = (s >> 33) as usize % n;
+                if j != i {
+                    pairs.push((i, j));
                 }
             }
         }
-        let b: Vec<SMatrix<f64, 3, 1>> =
-            (0..n).map(|_| Vector3::new(rnd(), rnd(), rnd())).collect();
-        let f = Factor::new(&sym, a).expect("SPD");
-        let x = f.solve(&sym, &b);
-        let bd = DVector::from_iterator(3 * n, b.iter().flat_map(|v| v.iter().copied()));
-        let xd = dense.cholesky().expect("SPD").solve(&bd);
-        for v in 0..n {
-            for r in 0..3 {
-                assert!((x[v][r] - xd[3 * v + r]).abs() < 1e-10);
-            }
-        }
+        let (worst, longest) = sparse_against_dense(n, &pairs, 3);
+        assert!(longest >= PARALLEL_COLUMN, "longest column {longest}");
+        assert!(worst < 1e-9, "{worst}");
     }
 
     #[test]

@@ -429,7 +429,65 @@ fn warm_start_after_a_new_loop_closure_matches_a_cold_solve() {
     }
 }
 
-/// The same graph solved on 1 and on 4 threads gives bit-identical poses.
+/// A 20 x 20 grid of SE(3) poses (odometry along rows, links between rows) with noisy
+/// measurements and a Cauchy kernel: its factor has long columns (parallel updates).
+fn grid_graph() -> PoseGraph {
+    let side = 20u64;
+    let mut g = PoseGraph::new(Space::Se3);
+    let mut s = 17u64;
+    let mut rnd = move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let truth = |r: u64, c: u64| Pose::from_xyz_ypr(c as f64, r as f64, 0.0, 0.0, 0.0, 0.0);
+    for r in 0..side {
+        for c in 0..side {
+            let noise = Pose::from_xyz_ypr(
+                0.3 * rnd(),
+                0.3 * rnd(),
+                0.1 * rnd(),
+                0.1 * rnd(),
+                0.05 * rnd(),
+                0.05 * rnd(),
+            );
+            g.add_node_se3(r * side + c, truth(r, c) * noise).unwrap();
+        }
+    }
+    let info = Matrix6::identity() * 100.0;
+    for r in 0..side {
+        for c in 0..side {
+            for (r2, c2) in [(r, c + 1), (r + 1, c)] {
+                if r2 < side && c2 < side {
+                    let m = truth(r, c).inverse()
+                        * truth(r2, c2)
+                        * Pose::from_xyz_ypr(
+                            0.02 * rnd(),
+                            0.02 * rnd(),
+                            0.0,
+                            0.01 * rnd(),
+                            0.0,
+                            0.0,
+                        );
+                    g.add_edge_se3(
+                        r * side + c,
+                        r2 * side + c2,
+                        EdgeKind::Registration,
+                        m,
+                        info,
+                        Kernel::Cauchy(10.0),
+                    )
+                    .unwrap();
+                }
+            }
+        }
+    }
+    g
+}
+
+/// The same graphs solved on 1 and on 4 threads give bit-identical poses (a planar ring
+/// with the chordal start, and a grid whose factor takes the parallel update path).
 #[test]
 fn solve_is_identical_for_any_thread_count() {
     let solve = |threads: usize| {
@@ -439,13 +497,17 @@ fn solve_is_identical_for_any_thread_count() {
             .unwrap();
         pool.install(|| {
             let mut r = ring(300, Kernel::Cauchy(10.0), 5, true);
-            r.graph
-                .optimise(&SolveParams {
-                    init: Init::Chordal,
-                    ..SolveParams::default()
-                })
-                .unwrap();
-            r.graph.nodes().iter().map(|n| n.pose).collect::<Vec<_>>()
+            let params = SolveParams {
+                init: Init::Chordal,
+                ..SolveParams::default()
+            };
+            r.graph.optimise(&params).unwrap();
+            let mut grid = grid_graph();
+            let report = grid.optimise(&SolveParams::default()).unwrap();
+            assert!(report.converged, "{}", report.termination);
+            let mut poses: Vec<Pose> = r.graph.nodes().iter().map(|n| n.pose.to_pose()).collect();
+            poses.extend(grid.nodes().iter().map(|n| n.pose.to_pose()));
+            poses
         })
     };
     assert_eq!(solve(1), solve(4));
