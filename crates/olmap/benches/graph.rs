@@ -61,7 +61,7 @@ fn solved_spiral() -> PoseGraph {
             r * a.cos(),
             r * a.sin(),
             0.001 * k as f64,
-            a + 1.5708,
+            a + std::f64::consts::FRAC_PI_2,
             0.0,
             0.0,
         )

@@ -301,11 +301,9 @@ fn gauge(n: usize, fixed: &[bool], pairs: &[(usize, usize)]) -> (Vec<bool>, Vec<
         }
     }
     let mut part_fixed = vec![false; n];
-    for v in 0..n {
-        if fixed[v] {
-            let r = find(&mut parent, v);
-            part_fixed[r] = true;
-        }
+    for (v, _) in fixed.iter().enumerate().filter(|(_, f)| **f) {
+        let r = find(&mut parent, v);
+        part_fixed[r] = true;
     }
     let mut held = fixed.to_vec();
     let mut gauges = Vec::new();
