@@ -82,6 +82,9 @@ enum Command {
     /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
     /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).
     Navgrid(commands::navgrid::NavgridArgs),
+    /// Pose graphs (g2o files): optimise one (sparse Levenberg-Marquardt on the manifold,
+    /// chordal initialisation, robust kernels) or describe it.
+    Graph(commands::graph::GraphArgs),
     /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
     /// segment.
     Query(commands::query::QueryArgs),
@@ -111,6 +114,7 @@ fn main() -> ExitCode {
         Command::Render(a) => commands::render::run(&a),
         Command::Navgrid(a) => commands::navgrid::run(&a),
         Command::Query(a) => commands::query::run(&a),
+        Command::Graph(a) => commands::graph::run(&a),
     };
     match result {
         Ok(code) => code,

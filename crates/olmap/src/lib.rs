@@ -45,6 +45,7 @@ pub mod file;
 #[cfg(any(test, feature = "test-support"))]
 pub mod fixtures;
 pub mod geometry;
+pub mod graph;
 pub mod grid2d;
 pub mod io;
 pub mod mapping;

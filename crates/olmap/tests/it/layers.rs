@@ -14,7 +14,7 @@ const LAYERS: &[&[&str]] = &[
     &["cloud"],
     &["io"],
     &["occupancy"],
-    &["scanner", "beacon", "grid2d"],
+    &["scanner", "beacon", "grid2d", "graph"],
     &["align"],
     &["render"],
     &["report"],

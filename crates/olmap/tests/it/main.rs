@@ -7,6 +7,7 @@ mod bad_input;
 mod beacon;
 mod data_safety;
 mod fuzz;
+mod graph;
 mod grid2d;
 mod layers;
 mod mapping;
