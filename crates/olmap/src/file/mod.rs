@@ -15,3 +15,4 @@ pub(crate) mod text;
 pub use atomic::write_atomic;
 pub(crate) use read::parse_file;
 pub use read::{open_buffered, read_bytes};
+pub use text::MAX_LINE_BYTES;

@@ -26,11 +26,7 @@ pub(crate) fn parse_file<T>(
     format: &'static str,
     parse: impl FnOnce(BufReader<File>) -> Result<T, ParseError>,
 ) -> Result<T> {
-    parse(open_buffered(path)?).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format,
-        source,
-    })
+    parse(open_buffered(path)?).map_err(|source| Error::read(path, format, source))
 }
 
 /// Reads a whole file into memory, with errors that name it.

@@ -59,6 +59,11 @@ const MAGIC: &[u8] = b"# Octomap OcTree binary file";
 /// The start of the first line of a full-probability `.ot` file.
 const OT_MAGIC: &[u8] = b"# Octomap OcTree file";
 
+/// Bytes of memory one expanded voxel takes while a tree is read into a map: 8 as a packed
+/// key being sorted, 12 as a [`VoxelKey`], 10 in the occupancy list's table (with its
+/// spare slots). Used to state what a refused tree would have cost.
+pub const BYTES_PER_EXPANDED_VOXEL: u64 = 30;
+
 /// The longest header line accepted (a guard against reading a binary file as one line).
 const MAX_HEADER_LINE: u64 = 64 * 1024;
 
@@ -121,7 +126,8 @@ impl Leaf {
 /// The body must hold exactly the tree: as many nodes as the header's `size`, and no bytes
 /// after it. `max_voxels` bounds the number of occupied voxels after expansion (an occupied
 /// leaf at depth `d` is `8^(16-d)` voxels); a tree above it is refused with
-/// [`ParseError::Unsupported`] before anything is expanded.
+/// [`ParseError::TooLarge`], which names the expansion and its memory estimate, before
+/// anything is expanded.
 ///
 /// Errors: [`ParseError::Empty`] for an empty stream; header problems at their line; body
 /// problems at their byte offset (counted from the start of the stream);
@@ -143,11 +149,19 @@ pub fn read<R: BufRead>(reader: R, max_voxels: usize) -> Result<BtTree, ParseErr
         sum.saturating_add(1u64 << (3 * (TREE_DEPTH - l.depth)))
     });
     if total > max_voxels as u64 {
-        return Err(ParseError::Unsupported(format!(
-            "the {} occupied leaves expand to {total} voxels of {} m, more than the limit of \
-             {max_voxels}",
-            stats.occupied_leaves, header.resolution
-        )));
+        let coarse: u64 = stats.occupied_leaves_by_depth[..TREE_DEPTH as usize]
+            .iter()
+            .sum();
+        return Err(ParseError::TooLarge {
+            what: format!(
+                "the {} occupied leaves ({coarse} of them coarser than one voxel) expand to \
+                 {total} voxels of {} m, about {} MiB in memory",
+                stats.occupied_leaves,
+                header.resolution,
+                total.saturating_mul(BYTES_PER_EXPANDED_VOXEL) >> 20
+            ),
+            limit: format!("{max_voxels} voxels"),
+        });
     }
     // `total` <= `max_voxels`, so it fits a usize. The voxels are gathered as packed
     // OctoMap keys (x, y, z in 16 bits each, x most significant), whose order as integers
@@ -935,13 +949,13 @@ mod tests {
         assert_eq!(tree.stats.occupied_leaves_by_depth[14], 1);
         assert!(matches!(
             read(&bytes[..], 63),
-            Err(ParseError::Unsupported(m)) if m.contains("64 voxels")
+            Err(ParseError::TooLarge { what, .. }) if what.contains("64 voxels")
         ));
         // An occupied depth-1 leaf would be 8^15 voxels: refused, nothing allocated.
         let huge = file(&header(2), &[0x02, 0x00]);
         assert!(matches!(
             read(&huge[..], LIMIT),
-            Err(ParseError::Unsupported(m)) if m.contains("35184372088832 voxels")
+            Err(ParseError::TooLarge { what, .. }) if what.contains("35184372088832 voxels")
         ));
     }
 

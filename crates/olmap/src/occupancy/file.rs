@@ -58,9 +58,15 @@ pub struct LoadedMap {
     pub bt: Option<BtStats>,
 }
 
-/// The most voxels a `.bt` file may expand to when read (8 bytes each in a `Vec` while
-/// reading, 10-15 bytes in the map): 100 million.
-pub const MAX_BT_VOXELS: usize = 100_000_000;
+/// The most voxels a `.bt` file may expand to when read: 2^24 = 16,777,216, one occupied
+/// leaf at depth 8 (a cube of 256 voxels a side), about 500 MiB while reading
+/// ([`octomap_bt::BYTES_PER_EXPANDED_VOXEL`] each). OctoMap prunes a node whose eight
+/// children are all occupied into one coarse leaf, so a small file can stand for many
+/// voxels: 5 leaves at depth 8 in a 76-byte file are 84 million. Real maps stay far below
+/// the limit (the shared data's `geb079.bt`: 185,673 voxels from 143,729 leaves); a tree
+/// beyond it is refused with [`Error::TooLarge`] naming the expansion before anything is
+/// allocated.
+pub const MAX_BT_VOXELS: usize = 1 << 24;
 
 fn unknown(path: &Path) -> Error {
     Error::UnknownFormat {

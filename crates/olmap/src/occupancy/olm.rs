@@ -25,12 +25,14 @@ use super::packed::{entry_count, entry_key, MAX_COUNT};
 use super::table::VoxelTable;
 use crate::error::{Location, ParseError, Result};
 use crate::file::crc32::Crc32;
-use crate::file::cursor::ByteCursor;
+use crate::file::cursor::StreamCursor;
 
 /// The 8 bytes every `.olm` file starts with.
 pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
 const VERSION: u32 = 1;
 const MAX_PACKED_KEY: u64 = (1 << 54) - 1;
+/// Keys reserved up front at most (512 KiB); beyond that the vector grows as keys arrive.
+const INITIAL_KEYS: u64 = 1 << 16;
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -64,15 +66,16 @@ impl OccupancyList {
         w.write_all(&out)
     }
 
-    /// Reads a `.olm` stream.
-    pub fn read_olm<R: BufRead>(mut reader: R) -> Result<OccupancyList, ParseError> {
-        let mut data = Vec::new();
-        reader.read_to_end(&mut data)?;
-        if data.is_empty() {
+    /// Reads a `.olm` stream. The stream is read as it comes (never held whole in memory),
+    /// and nothing is allocated for voxels the stream does not hold: a header announcing
+    /// 10^12 voxels over a few bytes ends as [`ParseError::Truncated`] at the first missing
+    /// byte, with memory in proportion to the bytes read.
+    pub fn read_olm<R: BufRead>(reader: R) -> Result<OccupancyList, ParseError> {
+        let mut r = StreamCursor::new(reader);
+        if r.at_end()? {
             return Err(ParseError::Empty);
         }
-        let mut r = ByteCursor::new(&data);
-        if r.take(8, "magic")? != OLM_MAGIC {
+        if &r.array::<8>("magic")? != OLM_MAGIC {
             return Err(ParseError::at(
                 Location::Byte(0),
                 "not an .olm file (bad magic bytes)",
@@ -85,21 +88,19 @@ impl OccupancyList {
             )));
         }
         let resolution = r.f64("resolution")?;
-        check_resolution(resolution)
-            .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
+        check_resolution(resolution).map_err(|e| {
+            ParseError::at(
+                Location::Byte(12),
+                e.to_string().replace("invalid argument: ", ""),
+            )
+        })?;
         let n = r.u64("voxel count")?;
-        // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
-        if n.saturating_mul(2) > r.remaining() as u64 {
-            return Err(ParseError::Truncated(format!(
-                "{n} voxels announced but only {} bytes follow",
-                r.remaining()
-            )));
-        }
-        let n = n as usize;
-        let mut keys = Vec::with_capacity(n);
+        // Reserve for what a small file could hold at most; beyond that the vector grows
+        // with the keys actually read (each takes a byte at least).
+        let mut keys = Vec::with_capacity(n.min(INITIAL_KEYS) as usize);
         let mut key = 0u64;
         for i in 0..n {
-            let at = r.pos() as u64;
+            let at = r.pos();
             let d = r.varint("key")?;
             if i > 0 && d == 0 {
                 return Err(ParseError::at(
@@ -115,9 +116,10 @@ impl OccupancyList {
                 })?;
             keys.push(key);
         }
-        let mut table = VoxelTable::with_capacity(n);
+        // Every key was read: the table is sized by voxels that are there.
+        let mut table = VoxelTable::with_capacity(keys.len());
         for &k in &keys {
-            let at = r.pos() as u64;
+            let at = r.pos();
             let c = r.varint("count")?;
             if c == 0 || c > MAX_COUNT as u64 {
                 return Err(ParseError::at(
@@ -127,20 +129,18 @@ impl OccupancyList {
             }
             table.update(k, |_| c as u16);
         }
-        let body_end = r.pos();
+        let computed = r.crc();
         let stored = r.u32("checksum")?;
-        let mut crc = Crc32::default();
-        crc.update(&data[..body_end]);
-        if crc.finish() != stored {
+        if computed != stored {
             return Err(ParseError::Malformed(format!(
-                "checksum mismatch (stored {stored:08x}, computed {:08x}): the file is damaged",
-                crc.finish()
+                "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is damaged"
             )));
         }
-        if r.remaining() != 0 {
+        let end = r.pos();
+        let rest = r.count_rest()?;
+        if rest != 0 {
             return Err(ParseError::Malformed(format!(
-                "{} unexpected bytes after the checksum",
-                r.remaining()
+                "{rest} unexpected bytes after the checksum (which ends at byte {end})"
             )));
         }
         let mut list = OccupancyList::new(resolution).expect("checked");

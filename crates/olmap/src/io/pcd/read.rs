@@ -9,6 +9,7 @@ use super::header::{read_header, DataEncoding, Header, Roles};
 use super::{shown, unpack_rgb, Scalar};
 use crate::cloud::PointCloud;
 use crate::error::ParseError;
+use crate::file::text::read_line_capped;
 use crate::io::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 
 /// Points reserved up front at most; beyond that the vectors grow as points arrive.
@@ -195,7 +196,7 @@ fn read_ascii<R: BufRead>(
     let mut found = 0u64;
     while found < header.points {
         line.clear();
-        if reader.read_until(b'\n', &mut line)? == 0 {
+        if read_line_capped(reader, &mut line, line_no + 1)? == 0 {
             return Err(ParseError::Truncated(format!(
                 "ascii data: the header announces {} points, found {found}",
                 header.points
