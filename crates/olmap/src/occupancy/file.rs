@@ -1,9 +1,10 @@
 //! Map files: reading and writing occupancy lists by file name.
 
+use std::io::BufRead;
 use std::path::Path;
 
 use super::list::OccupancyList;
-use crate::error::{Error, Result};
+use crate::error::{Error, ParseError, Result};
 use crate::io::octomap_bt::{self, BtStats};
 
 /// The map file formats olmap knows.
@@ -79,15 +80,25 @@ fn unknown(path: &Path) -> Error {
 pub fn read_map(path: impl AsRef<Path>) -> Result<LoadedMap> {
     let path = path.as_ref();
     let format = MapFormat::from_path(path).ok_or_else(|| unknown(path))?;
+    crate::file::parse_file(path, format.name(), |r| read_map_from(r, format))
+}
+
+/// Reads a map of a known format from a stream (no file name needed): what [`read_map`]
+/// does once it has opened the file. A `.bt` tree is expanded to at most
+/// [`MAX_BT_VOXELS`] voxels.
+pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedMap, ParseError> {
     match format {
         MapFormat::Olm => Ok(LoadedMap {
-            map: OccupancyList::read_olm_path(path)?,
+            map: OccupancyList::read_olm(reader)?,
             format,
             bt: None,
         }),
         MapFormat::OctomapBt => {
-            let tree = octomap_bt::read_path(path, MAX_BT_VOXELS)?;
-            let mut map = OccupancyList::with_capacity(tree.resolution, tree.occupied.len())?;
+            let tree = octomap_bt::read(reader, MAX_BT_VOXELS)?;
+            let mut map = OccupancyList::with_capacity(tree.resolution, tree.occupied.len())
+                .map_err(|e| {
+                    ParseError::Malformed(e.to_string().replace("invalid argument: ", ""))
+                })?;
             for k in &tree.occupied {
                 map.set(*k, 1)
                     .expect("OctoMap keys are within olmap's range");

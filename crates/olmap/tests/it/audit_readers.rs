@@ -418,3 +418,23 @@ fn audit_error_chain_says_each_cause_once() {
     assert_eq!(message.matches("line 2").count(), 1, "{message}");
     assert!(message.ends_with("line 2: expected at least three numbers 'x y z', found 'foo'"));
 }
+
+#[test]
+fn audit_pcd_ascii_huge_count_is_refused() {
+    // Found by the fuzzer: `COUNT 1 1 1000000000` made the ascii reader list a billion
+    // value slots (4 GiB) before reading a line. No line of 1 MiB holds that many values.
+    let text = "FIELDS x y z\nCOUNT 1 1 1000000000\nWIDTH 1\nDATA ascii\n1 2 3\n";
+    match io::pcd::read(text.as_bytes()) {
+        Err(ParseError::Invalid {
+            at: Location::Line(4),
+            reason,
+        }) => assert!(reason.contains("1000000002 values per point"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
+    // The largest count that fits still reads (here a line of 2 + 262,142 values).
+    let n = (1 << 19) - 2;
+    let mut text = format!("FIELDS x y z\nCOUNT 1 1 {n}\nWIDTH 1\nDATA ascii\n1 2");
+    text.push_str(&" 3".repeat(n));
+    text.push('\n');
+    assert_eq!(io::pcd::read(text.as_bytes()).unwrap().cloud.len(), 1);
+}
