@@ -14,5 +14,5 @@ pub(crate) mod text;
 
 pub use atomic::write_atomic;
 pub(crate) use read::parse_file;
-pub use read::{open_buffered, read_bytes};
+pub use read::{open_buffered, read_bytes, read_bytes_at_most};
 pub use text::MAX_LINE_BYTES;

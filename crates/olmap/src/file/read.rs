@@ -36,3 +36,20 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     r.read_to_end(&mut v).map_err(|e| Error::io(path, e))?;
     Ok(v)
 }
+
+/// Reads a whole file of a `format` into memory, refusing one of more than `max` bytes
+/// with [`Error::TooLarge`]: a file that never ends (a device, a pipe) stops there.
+pub fn read_bytes_at_most(path: &Path, max: u64, format: &'static str) -> Result<Vec<u8>> {
+    let mut v = Vec::new();
+    open_buffered(path)?
+        .take(max.saturating_add(1))
+        .read_to_end(&mut v)
+        .map_err(|e| Error::io(path, e))?;
+    if v.len() as u64 > max {
+        return Err(Error::TooLarge {
+            what: format!("{}: a {format} of more than {max} bytes", path.display()),
+            limit: format!("{max} bytes"),
+        });
+    }
+    Ok(v)
+}

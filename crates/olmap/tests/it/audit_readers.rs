@@ -438,3 +438,39 @@ fn audit_pcd_ascii_huge_count_is_refused() {
     text.push('\n');
     assert_eq!(io::pcd::read(text.as_bytes()).unwrap().cloud.len(), 1);
 }
+
+#[test]
+fn audit_whole_file_readers_are_bounded() {
+    // The scan list of `olmap map --list` and a ROS map's YAML were read whole with
+    // read_to_string / fs::read: a device or a huge file grew memory without bound.
+    let dir = tempfile::tempdir().unwrap();
+    let mut long = b"scan000.pcd\n".to_vec();
+    long.extend(std::iter::repeat_n(b'a', (1 << 20) + 10));
+    let list = write(dir.path(), "scans.txt", &long);
+    match io::scan_files(&[], Some(&list)) {
+        Err(Error::Read {
+            format: "scan list",
+            source:
+                ParseError::Invalid {
+                    at: Location::Line(2),
+                    reason,
+                },
+            ..
+        }) => assert!(reason.contains("longer than 1 MiB"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
+    let ok = write(dir.path(), "ok.txt", b"# scans\na.pcd\n\n  b.pcd  \n");
+    let files = io::scan_files(&[], Some(&ok)).unwrap();
+    assert_eq!(files, [dir.path().join("a.pcd"), dir.path().join("b.pcd")]);
+    let yaml = write(dir.path(), "map.yaml", &vec![b'#'; (1 << 20) + 1]);
+    match olmap::grid2d::read_ros_map(&yaml) {
+        Err(Error::TooLarge { what, limit }) => {
+            assert!(
+                what.contains("map.yaml") && what.contains("ROS map YAML"),
+                "{what}"
+            );
+            assert_eq!(limit, "1048576 bytes");
+        }
+        other => panic!("{other:?}"),
+    }
+}
