@@ -121,11 +121,15 @@ impl<R: BufRead> StreamCursor<R> {
     }
 
     fn truncated(&self, what: &str, start: u64, needed: u64) -> ParseError {
-        ParseError::Truncated(format!(
-            "the file ends at byte {} inside the {what} that starts at byte {start} ({needed} \
-             bytes)",
-            self.pos
-        ))
+        ParseError::Truncated(if self.pos == start {
+            format!("the file ends at byte {start}, where the {what} ({needed} bytes) should start")
+        } else {
+            format!(
+                "the file ends at byte {}, inside the {what} ({needed} bytes) that starts at \
+                 byte {start}",
+                self.pos
+            )
+        })
     }
 
     /// Fills `out` from the stream.

@@ -42,8 +42,8 @@ pub struct FuzzConfig {
     pub cases: Option<u64>,
     /// Stop after this long (`None`: no limit). At least one limit must be set.
     pub seconds: Option<f64>,
-    /// A case slower than this, twice in a row, is reported as a finding (a time bomb),
-    /// seconds.
+    /// A case slower than this, twice in a row (the second time in CPU time where the
+    /// system tells it), is reported as a finding (a time bomb), seconds.
     pub slow_seconds: f64,
     /// Also read every sample unmutated first (they must all read without error).
     pub check_samples: bool,
@@ -198,7 +198,7 @@ pub fn replay(
 /// for an error, `Err(panic message)`.
 fn run_one(target: Target, bytes: &[u8]) -> Result<Result<usize, String>, String> {
     match catch_unwind(AssertUnwindSafe(|| target.read(bytes))) {
-        Ok(r) => Ok(r.map_err(|e| e.to_string())),
+        Ok(r) => Ok(r.map_err(printed_message)),
         Err(payload) => Err(payload
             .downcast_ref::<&str>()
             .map(|s| s.to_string())
@@ -207,14 +207,59 @@ fn run_one(target: Target, bytes: &[u8]) -> Result<Result<usize, String>, String
     }
 }
 
-/// A clause said twice in an error message (`line 3: X: line 3: X` gives `line 3`):
-/// the message split at `": "`, a part of 6 characters or more that comes again.
+/// Something an error message says twice: a clause (the message split at `": "`, a part
+/// of 6 characters or more that comes again: `line 3: X: line 3: X` gives `line 3`), or a
+/// place (`line N` or `byte N` twice, as in `line 2: ... at line 2 column 5`).
 pub fn repeated_clause(message: &str) -> Option<String> {
     let parts: Vec<&str> = message.split(": ").map(str::trim).collect();
-    parts
+    let clause = parts
         .iter()
         .enumerate()
-        .find_map(|(i, p)| (p.len() >= 6 && parts[i + 1..].contains(p)).then(|| p.to_string()))
+        .find_map(|(i, p)| (p.len() >= 6 && parts[i + 1..].contains(p)).then(|| p.to_string()));
+    clause.or_else(|| {
+        let mut places: Vec<String> = Vec::new();
+        for word in ["line ", "byte "] {
+            for (at, _) in message.match_indices(word) {
+                let digits: String = message[at + word.len()..]
+                    .chars()
+                    .take_while(char::is_ascii_digit)
+                    .collect();
+                if !digits.is_empty() {
+                    places.push(format!("{word}{digits}"));
+                }
+            }
+        }
+        places.sort();
+        places
+            .windows(2)
+            .find(|w| w[0] == w[1])
+            .map(|w| w[0].clone())
+    })
+}
+
+/// CPU seconds this thread has used (Linux: `/proc/thread-self/stat`, in 10 ms ticks);
+/// `None` elsewhere.
+fn thread_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
+    // After the command name in parentheses: state, then fields 4.. ; utime and stime
+    // are fields 14 and 15 (1-based), in clock ticks of 1/100 s.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let utime: f64 = fields.next()?.parse().ok()?;
+    let stime: f64 = fields.next()?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+/// The one-line message the CLI prints for a reader's error: wrapped with a path as the
+/// path-level readers do, then the chain of causes said once
+/// ([`crate::error::chain_message`]).
+fn printed_message(e: crate::error::ParseError) -> String {
+    let e = crate::Error::read("input", "fuzzed", e);
+    let mut chain: Vec<&(dyn std::error::Error + 'static)> = vec![&e];
+    while let Some(next) = chain.last().and_then(|c| c.source()) {
+        chain.push(next);
+    }
+    crate::error::chain_message(chain)
 }
 
 /// Runs the fuzzer over `samples` and reports; `on_event` hears of every finding as it
@@ -281,10 +326,16 @@ pub fn run(
             let outcome = run_one(sample.target, &bytes);
             let mut took = t0.elapsed().as_secs_f64();
             if took > config.slow_seconds {
-                // A busy machine stalls a case now and then: a time bomb is slow twice.
+                // A busy machine stalls a case now and then: a time bomb is slow again,
+                // and in the CPU time of this thread where the system tells it.
+                let cpu0 = thread_cpu_seconds();
                 let t1 = Instant::now();
                 let _ = run_one(sample.target, &bytes);
-                took = took.min(t1.elapsed().as_secs_f64());
+                let again = match (cpu0, thread_cpu_seconds()) {
+                    (Some(a), Some(b)) => b - a,
+                    _ => t1.elapsed().as_secs_f64(),
+                };
+                took = took.min(again);
             }
             let stats = &mut targets
                 .iter_mut()
@@ -343,6 +394,19 @@ mod tests {
     use super::*;
 
     #[test]
+    fn thread_cpu_time_is_read_on_linux() {
+        let t0 = thread_cpu_seconds();
+        assert_eq!(t0.is_some(), cfg!(target_os = "linux"));
+        let mut x = 0u64;
+        for i in 0..1_000_000u64 {
+            x = std::hint::black_box(x.wrapping_mul(31).wrapping_add(i));
+        }
+        if let (Some(a), Some(b)) = (t0, thread_cpu_seconds()) {
+            assert!(a >= 0.0 && b >= a, "{a} {b}");
+        }
+    }
+
+    #[test]
     fn repeated_clauses_are_found() {
         assert_eq!(
             repeated_clause("a.pcd: not a valid PCD file: line 3: bad x: line 3: bad x"),
@@ -351,5 +415,17 @@ mod tests {
         assert_eq!(repeated_clause("line 3: expected x: found y"), None);
         // Short parts (`x`, `3`) repeat innocently.
         assert_eq!(repeated_clause("x: 3: x: 3"), None);
+        assert_eq!(
+            repeated_clause("line 2: invalid JSON: expected value at line 2 column 5"),
+            Some("line 2".into())
+        );
+        assert_eq!(
+            repeated_clause("the file ends at byte 40 inside the point at byte 40"),
+            Some("byte 40".into())
+        );
+        assert_eq!(
+            repeated_clause("line 2: given twice (first on line 1)"),
+            None
+        );
     }
 }

@@ -60,7 +60,7 @@ pub struct LoadedMap {
 }
 
 /// The most voxels a `.bt` file may expand to when read: 2^24 = 16,777,216, one occupied
-/// leaf at depth 8 (a cube of 256 voxels a side), about 500 MiB while reading
+/// leaf at depth 8 (a cube of 256 voxels a side), about 170 MiB in the map
 /// ([`octomap_bt::BYTES_PER_EXPANDED_VOXEL`] each). OctoMap prunes a node whose eight
 /// children are all occupied into one coarse leaf, so a small file can stand for many
 /// voxels: 5 leaves at depth 8 in a 76-byte file are 84 million. Real maps stay far below
@@ -94,15 +94,17 @@ pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedM
             bt: None,
         }),
         MapFormat::OctomapBt => {
-            let tree = octomap_bt::read(reader, MAX_BT_VOXELS)?;
-            let mut map = OccupancyList::with_capacity(tree.resolution, tree.occupied.len())
-                .map_err(|e| {
+            // Expanded straight into the map (no sorted copy): 10 bytes a voxel.
+            let tree = octomap_bt::read_leaves(reader)?;
+            let total = tree.expanded_voxels_within(MAX_BT_VOXELS)?;
+            let mut map =
+                OccupancyList::with_capacity(tree.resolution, total as usize).map_err(|e| {
                     ParseError::Malformed(e.to_string().replace("invalid argument: ", ""))
                 })?;
-            for k in &tree.occupied {
-                map.set(*k, 1)
-                    .expect("OctoMap keys are within olmap's range");
-            }
+            tree.for_each_voxel(|k| {
+                map.set(k, 1)
+                    .expect("OctoMap keys are within olmap's range")
+            });
             Ok(LoadedMap {
                 map,
                 format,
