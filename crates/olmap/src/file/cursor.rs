@@ -121,12 +121,16 @@ impl<R: BufRead> StreamCursor<R> {
     }
 
     fn truncated(&self, what: &str, start: u64, needed: u64) -> ParseError {
+        let needed = match needed {
+            1 => "1 byte".to_string(),
+            n => format!("{n} bytes"),
+        };
         ParseError::Truncated(if self.pos == start {
-            format!("the file ends at byte {start}, where the {what} ({needed} bytes) should start")
+            format!("the file ends at byte {start}, where the {what} ({needed}) should start")
         } else {
             format!(
-                "the file ends at byte {}, inside the {what} ({needed} bytes) that starts at \
-                 byte {start}",
+                "the file ends at byte {}, inside the {what} ({needed}) that starts at byte \
+                 {start}",
                 self.pos
             )
         })
