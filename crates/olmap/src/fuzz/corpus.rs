@@ -424,8 +424,8 @@ fn mirror_log() -> MirrorLog {
 /// A 2D scan with intensities and a beam without return.
 fn laser_scan() -> LaserScan {
     LaserScan {
-        angle_min: -1.5707963267948966,
-        angle_increment: 0.3490658503988659,
+        angle_min: -std::f64::consts::FRAC_PI_2,
+        angle_increment: 20f64.to_radians(),
         range_min: 0.05,
         range_max: 8.0,
         ranges: vec![2.5, f32::INFINITY, 3.25, 0.5, 7.9, 1.0, 1.25, 4.0, 6.5, 0.3],
