@@ -64,6 +64,9 @@ enum Command {
     /// Map a multi-robot dataset as a team: sightings confine the scan searches (thesis
     /// (6.2)-(6.4)), seen robots are cleared; optionally compare with every robot alone.
     Team(commands::team::TeamArgs),
+    /// Scan-store files: what one holds (`info`), several merged into one (`merge`), the
+    /// readable records of a damaged one recovered (`salvage`).
+    Store(commands::store::StoreArgs),
     /// Run the built-in demonstration on generated data (no download needed).
     Demo(commands::demo::DemoArgs),
     /// Rotating-mirror 3D scanner tools: convert a raw log to a cloud, check repeatability.
@@ -100,6 +103,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Team(a) => commands::team::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
+        Command::Store(a) => commands::store::run(&a),
         Command::Grid2d(a) => commands::grid2d::run(&a),
         Command::Beacons(a) => commands::beacons::run(&a),
         Command::Scanner(a) => commands::scanner::run(&a),

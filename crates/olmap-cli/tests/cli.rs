@@ -1209,3 +1209,193 @@ fn export_rrd_writes_a_rerun_recording_or_names_the_feature() {
     assert!(!out.status.success());
     assert!(!ply.exists());
 }
+
+#[test]
+fn audit_map_report_dir_checked_before_compute_cli() {
+    // The audit: `olmap map … --report nodir/r.json` computed everything, wrote the map
+    // and poses, then failed. Now it fails first and writes nothing.
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("m.olm");
+    let poses = dir.path().join("p.txt");
+    let report = dir.path().join("nodir/r.json");
+    let out = olmap(&[
+        "map",
+        d.join("3dtk_dat").to_str().unwrap(),
+        "-o",
+        map.to_str().unwrap(),
+        "--poses-out",
+        poses.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nodir") && err.contains("does not exist"),
+        "{err}"
+    );
+    assert!(!map.exists() && !poses.exists());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+fn small_store(robots: u32, seqs: u32) -> olmap::team::ScanStore {
+    let mut s = olmap::team::ScanStore::new();
+    for robot in 0..robots {
+        s.set_robot_name(robot, &format!("bot{robot}")).unwrap();
+        for seq in 0..seqs {
+            let points = (0..20)
+                .map(|i| nalgebra::Point3::new(i as f32 * 0.1, seq as f32, robot as f32))
+                .collect();
+            s.insert(olmap::team::StoredScan {
+                robot,
+                seq,
+                time: seq as f64,
+                odometry: None,
+                cloud: olmap::cloud::PointCloud::from_points(points),
+                sightings: Vec::new(),
+            })
+            .unwrap();
+        }
+    }
+    s
+}
+
+#[test]
+fn store_info_merge_and_salvage() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let whole = small_store(2, 5);
+    whole.robot_store(0).write(p("a.store")).unwrap();
+    whole.robot_store(1).write(p("b.store")).unwrap();
+    let v = json(&olmap(&[
+        "store",
+        "merge",
+        &p("a.store"),
+        &p("b.store"),
+        "-o",
+        &p("m.store"),
+        "--json",
+    ]));
+    assert_eq!(v["records"], 10);
+    assert_eq!(olmap::team::ScanStore::read(p("m.store")).unwrap(), whole);
+    let v = json(&olmap(&["store", "info", &p("m.store"), "--json"]));
+    assert_eq!(v["intact"], true);
+    assert_eq!(v["version"], olmap::team::STORE_VERSION);
+    assert_eq!(v["robots"][1]["name"], "bot1");
+    assert_eq!(v["robots"][1]["last_seq"], 4);
+    // One bad byte in the middle of the file: info says where (exit 1), salvage keeps
+    // nine records of ten.
+    let mut bytes = std::fs::read(p("m.store")).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x55;
+    std::fs::write(p("bad.store"), &bytes).unwrap();
+    let out = olmap(&["store", "info", &p("bad.store"), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["intact"], false);
+    assert_eq!(v["records"], 9);
+    let start = v["damage"][0]["start"].as_u64().unwrap();
+    let end = v["damage"][0]["end"].as_u64().unwrap();
+    assert!(start <= mid as u64 && (mid as u64) < end, "{v}");
+    let v = json(&olmap(&[
+        "store",
+        "salvage",
+        &p("bad.store"),
+        "-o",
+        &p("fixed.store"),
+        "--json",
+    ]));
+    assert_eq!(v["records_recovered"], 9);
+    assert_eq!(v["records_lost"], 1);
+    assert_eq!(
+        olmap::team::ScanStore::read(p("fixed.store"))
+            .unwrap()
+            .len(),
+        9
+    );
+    // The strict readers refuse the damaged file with its offset; text output works too.
+    let out = olmap(&["store", "merge", &p("bad.store"), "-o", &p("x.store")]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("byte {start}")), "{err}");
+    let out = olmap(&["store", "info", &p("bad.store")]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("DAMAGED"));
+}
+
+/// The names in `dir` a user sees (not hidden), sorted.
+fn visible_names(dir: &std::path::Path) -> Vec<String> {
+    let mut v: Vec<String> = match std::fs::read_dir(dir) {
+        Ok(entries) => entries
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.starts_with('.'))
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    v.sort();
+    v
+}
+
+#[test]
+fn audit_killed_run_leaves_no_partial_output() {
+    // A team run killed at any moment leaves its output folder with the complete set or
+    // nothing, never a part of it (the outputs are put in place together at the end).
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let sim = olmap(&[
+        "simulate",
+        "--robots",
+        "2",
+        "--scans-per-robot",
+        "3",
+        "--seed",
+        "4",
+        "--output",
+        data.to_str().unwrap(),
+    ]);
+    assert!(sim.status.success());
+    let complete = [
+        "report.html",
+        "report.json",
+        "solo",
+        "team.bt",
+        "team.olm",
+        "team.ply",
+        "team.store",
+        "team_poses.txt",
+    ];
+    for (i, delay_ms) in [100u64, 700, 2000, 5000].into_iter().enumerate() {
+        let out = dir.path().join(format!("out{i}"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_olmap"))
+            .args([
+                "team",
+                data.to_str().unwrap(),
+                "--solo",
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let names = visible_names(&out);
+        assert!(
+            names.is_empty() || names == complete,
+            "killed after {delay_ms} ms ({status}): {names:?}"
+        );
+    }
+    // Run to the end: the complete set.
+    let out = dir.path().join("whole");
+    let r = olmap(&[
+        "team",
+        data.to_str().unwrap(),
+        "--solo",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.status.success());
+    assert_eq!(visible_names(&out), complete);
+}

@@ -34,6 +34,7 @@ pub struct ExportArgs {
 
 /// Runs `olmap export`.
 pub fn run(a: &ExportArgs) -> anyhow::Result<ExitCode> {
+    olmap::file::check_output(&a.output, "export")?;
     let map = occupancy::read_map(&a.map)?.map.threshold(a.min_count);
     if super::rrd::is_rrd(&a.output) {
         let poses = a

@@ -20,6 +20,7 @@ pub struct MergeArgs {
 /// Runs `olmap merge`.
 pub fn run(a: &MergeArgs) -> anyhow::Result<ExitCode> {
     MapFormat::of_output(&a.output)?;
+    olmap::file::check_output(&a.output, "map")?;
     let mut it = a.maps.iter();
     let first = it.next().expect("clap requires two maps");
     let mut map = occupancy::read_map(first)?.map;

@@ -20,5 +20,6 @@ pub mod render;
 pub mod rrd;
 pub mod scanner;
 pub mod simulate;
+pub mod store;
 pub mod team;
 pub mod voxelize;

@@ -47,6 +47,7 @@ pub struct NavgridArgs {
 
 /// Runs `olmap navgrid`.
 pub fn run(a: &NavgridArgs) -> anyhow::Result<ExitCode> {
+    olmap::grid2d::check_ros_map_output(&a.output)?;
     let map = read(&a.map)?;
     let poses: Vec<Pose> = PoseList::read_path(&a.poses)?
         .poses

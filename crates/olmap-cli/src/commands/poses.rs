@@ -31,6 +31,9 @@ pub struct PosesArgs {
 
 /// Runs the command.
 pub fn run(a: &PosesArgs) -> anyhow::Result<ExitCode> {
+    if let Some(out) = &a.out {
+        olmap::file::check_output(out, "pose list")?;
+    }
     let mut list = PoseList::default();
     for f in &a.files {
         list.poses

@@ -123,6 +123,7 @@ pub(super) fn read(path: &PathBuf) -> anyhow::Result<OccupancyList> {
 
 /// Runs `olmap render`.
 pub fn run(a: &RenderArgs) -> anyhow::Result<ExitCode> {
+    olmap::file::check_output(&a.output, "PNG image")?;
     let map = read(&a.map)?;
     let shown = a.output.display().to_string();
     let summary = match a.view {

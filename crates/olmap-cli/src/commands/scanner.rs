@@ -85,6 +85,7 @@ pub fn run(a: &ScannerArgs) -> anyhow::Result<ExitCode> {
 
 fn convert(a: &ConvertRawArgs) -> anyhow::Result<ExitCode> {
     let start = Instant::now();
+    olmap::file::check_output(&a.output, "point cloud")?;
     if let Some(m) = a.max_range {
         if !(m.is_finite() && m > 0.0) {
             bail!("--max-range must be a positive number of metres, got {m}");

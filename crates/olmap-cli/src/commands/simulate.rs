@@ -148,6 +148,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         p.noise.sigma = a.range_noise.min(0.01);
         config.scanner2d = Some(p);
     }
+    olmap::sim::check_dataset_output(&a.output)?;
     let start = Instant::now();
     let total = (a.robots * a.scans_per_robot) as u64;
     let bar = progress(total, "simulate", a.json);

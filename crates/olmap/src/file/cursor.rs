@@ -20,6 +20,14 @@ impl<'a> ByteCursor<'a> {
         ByteCursor { data, pos: 0 }
     }
 
+    /// A cursor over `data` starting at byte `pos` (positions stay those of `data`).
+    pub fn new_at(data: &'a [u8], pos: usize) -> Self {
+        ByteCursor {
+            data,
+            pos: pos.min(data.len()),
+        }
+    }
+
     /// Bytes consumed so far.
     pub fn pos(&self) -> usize {
         self.pos
@@ -151,6 +159,41 @@ impl<R: BufRead> StreamCursor<R> {
             got += n;
         }
         Ok(())
+    }
+
+    /// Replaces `buf`'s contents with the next `len` bytes, growing it as they arrive
+    /// (nothing is reserved for bytes that are not there); `false` when the stream ends
+    /// first (`buf` then holds what there was).
+    pub fn read_vec(&mut self, buf: &mut Vec<u8>, len: u64) -> Result<bool, ParseError> {
+        buf.clear();
+        while (buf.len() as u64) < len {
+            let chunk = self.buffer()?;
+            if chunk.is_empty() {
+                return Ok(false);
+            }
+            let n = chunk
+                .len()
+                .min((len - buf.len() as u64).min(usize::MAX as u64) as usize);
+            buf.extend_from_slice(&chunk[..n]);
+            self.consume(n);
+        }
+        Ok(true)
+    }
+
+    /// Fills `out` from the stream; `false` when the stream ends first.
+    pub fn read_exact_or_end(&mut self, out: &mut [u8]) -> Result<bool, ParseError> {
+        let mut got = 0;
+        while got < out.len() {
+            let buf = self.buffer()?;
+            if buf.is_empty() {
+                return Ok(false);
+            }
+            let n = buf.len().min(out.len() - got);
+            out[got..got + n].copy_from_slice(&buf[..n]);
+            self.consume(n);
+            got += n;
+        }
+        Ok(true)
     }
 
     /// The next fixed-size array of bytes.

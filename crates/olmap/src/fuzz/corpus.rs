@@ -330,10 +330,16 @@ fn own_files() -> Result<Vec<Sample>> {
         Target::Frames3dtk,
         to_bytes(".frames", |w| io::slam6d::write_frames(w, &frames))?,
     ));
+    let store_bytes = to_bytes("store", |w| store(&cloud, &poses)?.write_to(w))?;
     out.push(Sample::new(
         "olmap scan store",
         Target::Store,
-        to_bytes("store", |w| store(&cloud, &poses)?.write_to(w))?,
+        store_bytes.clone(),
+    ));
+    out.push(Sample::new(
+        "olmap scan store",
+        Target::StoreSalvage,
+        store_bytes,
     ));
     out.push(Sample::new(
         "olmap mirror log",

@@ -29,6 +29,9 @@ pub enum Target {
     Frames3dtk,
     /// A scan store ([`ScanStore::read_from`]).
     Store,
+    /// A scan store read by the salvage reader ([`ScanStore::salvage_from`]), which must
+    /// take any damage without panicking.
+    StoreSalvage,
     /// A rotating-mirror scanner's raw log ([`MirrorLog::read`]).
     MirrorLog,
     /// A 2D laser scan as CSV ([`LaserScan::read_csv`]), then its points.
@@ -49,6 +52,7 @@ impl Target {
             Target::Pose3dtk => "3DTK .pose".into(),
             Target::Frames3dtk => "3DTK .frames".into(),
             Target::Store => "scan store".into(),
+            Target::StoreSalvage => "scan store salvage".into(),
             Target::MirrorLog => "mirror log".into(),
             Target::LaserScanCsv => "laser scan CSV".into(),
             Target::LaserScanJson => "laser scan JSON".into(),
@@ -76,6 +80,7 @@ impl Target {
             Target::Pose3dtk => io::slam6d::read_pose(bytes).map(|_| 1),
             Target::Frames3dtk => Ok(io::slam6d::read_frames(bytes)?.len()),
             Target::Store => Ok(ScanStore::read_from(bytes)?.len()),
+            Target::StoreSalvage => Ok(ScanStore::salvage_from(bytes)?.0.len()),
             Target::MirrorLog => {
                 let log = MirrorLog::read(bytes)?;
                 Ok(log.sweeps.len() + log.events.len())

@@ -53,6 +53,6 @@ pub use navigation::{navigation_grid, NavGridParams};
 pub use pipeline::{run_grid2d, Grid2dJob, Grid2dRun};
 pub use raytrace::{bresenham, Bresenham};
 pub use report::{CellsReport, ExtentReport, Grid2dReport, NavgridReport};
-pub use ros_map::{read_ros_map, write_ros_map};
+pub use ros_map::{check_ros_map_output, read_ros_map, write_ros_map};
 pub use sensor_model::SensorModel2d;
 pub use trinary::{CellCounts, Thresholds, Trinary, TrinaryGrid};

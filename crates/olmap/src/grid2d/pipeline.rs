@@ -5,9 +5,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::report::{CellsReport, ExtentReport, Grid2dReport};
-use super::{write_ros_map, OccupancyGrid2d, SensorModel2d, Thresholds, TrinaryGrid};
+use super::ros_map::{declare_ros_map, write_ros_map_into};
+use super::{OccupancyGrid2d, SensorModel2d, Thresholds, TrinaryGrid};
 use crate::cloud::LaserScan;
 use crate::error::{Error, Result};
+use crate::file::OutputSet;
 use crate::geometry::PoseList;
 use crate::occupancy::PositionBuckets;
 
@@ -40,8 +42,9 @@ pub struct Grid2dRun {
     pub report: Grid2dReport,
 }
 
-/// Runs a [`Grid2dJob`]: an output that is not a `.pgm` image is refused first; a scan
-/// without a pose is [`Error::NotFound`].
+/// Runs a [`Grid2dJob`]: an output that is not a `.pgm` image, or an image or YAML path
+/// that cannot be written, is refused first; a scan without a pose is
+/// [`Error::NotFound`]. The image and the YAML appear together or not at all.
 pub fn run_grid2d(job: &Grid2dJob) -> Result<Grid2dRun> {
     let start = Instant::now();
     if job.output.extension().and_then(|e| e.to_str()) != Some("pgm") {
@@ -50,6 +53,8 @@ pub fn run_grid2d(job: &Grid2dJob) -> Result<Grid2dRun> {
             job.output.display()
         )));
     }
+    let mut set = OutputSet::new();
+    declare_ros_map(&mut set, &job.output)?;
     let list = PoseList::read_path(&job.poses)?;
     let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned());
     let name = |p: &Path| p.file_name().map(|s| s.to_string_lossy().into_owned());
@@ -84,7 +89,8 @@ pub fn run_grid2d(job: &Grid2dJob) -> Result<Grid2dRun> {
         }
     }
     let map = grid.to_trinary(Thresholds::default());
-    let yaml = write_ros_map(&job.output, &map)?;
+    let yaml = write_ros_map_into(&mut set, &job.output, &map)?;
+    set.commit()?;
     let ((x0, y0), (x1, y1)) = grid.extent();
     let report = Grid2dReport {
         output: job.output.display().to_string(),

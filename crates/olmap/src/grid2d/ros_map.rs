@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 
 use super::trinary::{Thresholds, Trinary, TrinaryGrid};
 use crate::error::{Error, Location, ParseError, Result};
-use crate::file::{read_bytes_at_most, write_atomic};
+use crate::file::{read_bytes_at_most, write_atomic, OutputSet};
 
 const YAML_FORMAT: &str = "ROS map YAML";
 const PGM_FORMAT: &str = "PGM image";
@@ -42,9 +42,35 @@ pub fn yaml_path_for(pgm: &Path) -> PathBuf {
 }
 
 /// Writes `map` as the PGM image `pgm_path` and the YAML file beside it (same name,
-/// extension `yaml`), both atomically, the image first; returns the YAML path.
+/// extension `yaml`), as one [`OutputSet`]: both appear or neither; returns the YAML path.
 pub fn write_ros_map(pgm_path: impl AsRef<Path>, map: &TrinaryGrid) -> Result<PathBuf> {
     let pgm_path = pgm_path.as_ref();
+    let mut set = OutputSet::new();
+    declare_ros_map(&mut set, pgm_path)?;
+    let yaml = write_ros_map_into(&mut set, pgm_path, map)?;
+    set.commit()?;
+    Ok(yaml)
+}
+
+/// Checks, before computing, that [`write_ros_map`] can write the image `pgm_path` and its
+/// YAML file (folders exist and are writable, neither is a folder).
+pub fn check_ros_map_output(pgm_path: &Path) -> Result<()> {
+    declare_ros_map(&mut OutputSet::new(), pgm_path)
+}
+
+/// Declares the image `pgm_path` and its YAML file in `set` (checked now).
+pub(crate) fn declare_ros_map(set: &mut OutputSet, pgm_path: &Path) -> Result<()> {
+    set.file(pgm_path, PGM_FORMAT)?;
+    set.file(&yaml_path_for(pgm_path), YAML_FORMAT)
+}
+
+/// Writes the files declared by [`declare_ros_map`] where `set` stages them; returns the
+/// YAML path (the final one).
+pub(crate) fn write_ros_map_into(
+    set: &mut OutputSet,
+    pgm_path: &Path,
+    map: &TrinaryGrid,
+) -> Result<PathBuf> {
     if map.cells.len() != map.width * map.height {
         return Err(Error::InvalidArgument(format!(
             "trinary map of {} x {} cells holds {} cells",
@@ -70,7 +96,7 @@ pub fn write_ros_map(pgm_path: impl AsRef<Path>, map: &TrinaryGrid) -> Result<Pa
             reason: "the image needs a file name in UTF-8".into(),
         })?
         .to_string();
-    write_atomic(pgm_path, PGM_FORMAT, |w| {
+    write_atomic(&set.path(pgm_path)?, PGM_FORMAT, |w| {
         write!(
             w,
             "P5\n# CREATOR: olmap grid2d {:.3} m/pix\n{} {}\n255\n",
@@ -89,7 +115,7 @@ pub fn write_ros_map(pgm_path: impl AsRef<Path>, map: &TrinaryGrid) -> Result<Pa
         Ok(())
     })?;
     let yaml = yaml_path_for(pgm_path);
-    write_atomic(&yaml, YAML_FORMAT, |w| {
+    write_atomic(&set.path(&yaml)?, YAML_FORMAT, |w| {
         writeln!(w, "image: {}", yaml_string(&image))?;
         writeln!(w, "resolution: {:?}", map.resolution)?;
         writeln!(

@@ -157,8 +157,10 @@ pub struct ConvertReport {
 }
 
 /// Reads, filters and writes a cloud as `job` says; `start` is when the command began
-/// (the report's `seconds` count from it).
+/// (the report's `seconds` count from it). An output that cannot be written is refused
+/// before the input is read.
 pub fn convert_cloud_file(job: &ConvertJob, start: Instant) -> Result<ConvertReport> {
+    crate::file::check_output(&job.output, "point cloud")?;
     let loaded = read_cloud_with(&job.input, &job.read)?;
     let read_points = loaded.cloud.len();
     let mut cloud = loaded.cloud;

@@ -1,20 +1,20 @@
 //! The HTML report of a map build, beside its JSON report (`olmap map --report`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::{MapBuild, MapReport};
 use crate::error::Result;
 use crate::report::{sections, HtmlReport};
 
-/// Writes the HTML report of `build` beside `json_path`: the run's parameters, a top view
-/// with the scan path, the entropy curve, the placed and rejected scans and the JSON
-/// report itself; returns its path.
+/// Writes the HTML report of `build` to `html_path` (conventionally beside the JSON report:
+/// [`crate::file::html_path_beside`]): the run's parameters, a top view with the scan
+/// path, the entropy curve, the placed and rejected scans and the JSON report itself.
 pub fn write_map_html(
     build: &MapBuild,
     report: &MapReport,
     max_range: f64,
-    json_path: &Path,
-) -> Result<PathBuf> {
+    html_path: &Path,
+) -> Result<()> {
     let mut page = HtmlReport::new("olmap map report");
     sections::parameters(
         &mut page,
@@ -71,5 +71,5 @@ pub fn write_map_html(
     }
     page.heading("Report (JSON)");
     page.json(report);
-    sections::write_beside(&page, json_path)
+    page.write(html_path)
 }

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use super::input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 use super::{build_map, MapBuild, MapParams, MapReport};
-use crate::error::{Error, Result};
-use crate::file::write_atomic;
+use crate::error::Result;
+use crate::file::{html_path_beside, write_atomic, OutputSet};
 use crate::geometry::PoseList;
 use crate::io::ReadOptions;
 use crate::occupancy::{self, MapFormat};
@@ -49,11 +49,39 @@ pub struct MapRun {
     pub poses: PoseList,
 }
 
-/// Runs a [`MapJob`]: reads the scans ([`Stage::Read`]), builds the map ([`Stage::Map`]),
-/// writes every requested output atomically. Errors name the file or scan at fault; an
-/// output that is not a map file is refused before anything is read.
+/// Declares the outputs of a [`MapJob`] known before mapping (each checked now: see
+/// [`OutputSet`]).
+fn declare_outputs(job: &MapJob) -> Result<OutputSet> {
+    let mut set = OutputSet::new();
+    set.file(&job.output, "map")?;
+    if let Some(p) = &job.poses_out {
+        set.file(p, "pose list")?;
+    }
+    if let Some(dir) = &job.scans_out {
+        set.folder(dir)?;
+        set.file(&dir.join("poses.txt"), "pose list")?;
+    }
+    if let Some(p) = &job.report {
+        set.file(p, "JSON report")?;
+        let html = html_path_beside(p);
+        if cfg!(feature = "render") {
+            set.file(&html, "HTML report")?;
+        } else {
+            set.remove(&html)?;
+        }
+    }
+    Ok(set)
+}
+
+/// Runs a [`MapJob`]: checks every output path (its folder exists and is writable, it is
+/// not a folder, no two are the same file) and that the map output is a map file before
+/// anything is read; reads the scans ([`Stage::Read`]), builds the map ([`Stage::Map`]),
+/// then writes every requested output as one [`OutputSet`]: all of them appear, or (on an
+/// error, or a kill before the end) none and the old files stay. Errors name the file or
+/// scan at fault.
 pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     MapFormat::of_output(&job.output)?;
+    let mut set = declare_outputs(job)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
     let mut params = job.params.clone();
@@ -63,21 +91,21 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     let build = build_map(&scans, &params, |done, total| {
         progress(Stage::Map, done, total)
     })?;
-    occupancy::write_map(&job.output, &build.map)?;
+    occupancy::write_map(set.path(&job.output)?, &build.map)?;
     let mut poses = PoseList::default();
     for p in &build.placed {
         poses.push(p.name.clone(), p.pose);
     }
     if let Some(out) = &job.poses_out {
-        poses.write_path(out)?;
+        poses.write_path(set.path(out)?)?;
     }
     if let Some(dir) = &job.scans_out {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         for s in &build.scan_maps {
-            s.voxels
-                .write_olm_path(dir.join(format!("{}.olm", s.name)))?;
+            let path = dir.join(format!("{}.olm", s.name));
+            set.file(&path, "olmap .olm")?;
+            s.voxels.write_olm_path(set.path(&path)?)?;
         }
-        poses.write_path(dir.join("poses.txt"))?;
+        poses.write_path(set.path(&dir.join("poses.txt"))?)?;
     }
     let report = MapReport::new(
         &build,
@@ -86,12 +114,18 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
         &job.output.display().to_string(),
     );
     if let Some(path) = &job.report {
-        write_atomic(path, "JSON report", |w| {
+        write_atomic(&set.path(path)?, "JSON report", |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
         })?;
         #[cfg(feature = "render")]
-        super::html::write_map_html(&build, &report, params.sensor.max_range, path)?;
+        super::html::write_map_html(
+            &build,
+            &report,
+            params.sensor.max_range,
+            &set.path(&html_path_beside(path))?,
+        )?;
     }
+    set.commit()?;
     Ok(MapRun {
         build,
         report,

@@ -31,7 +31,7 @@ mod voxelize;
 pub use buckets::PositionBuckets;
 pub use file::{read_map, read_map_from, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
 pub use list::{OccupancyList, OccupancyStats};
-pub use olm::OLM_MAGIC;
+pub use olm::{OLM_MAGIC, OLM_VERSION};
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;
 pub use query::RayHit;

@@ -97,10 +97,12 @@ pub struct VoxelizeRun {
 }
 
 /// Runs a [`VoxelizeJob`] ([`Stage::Voxelize`] progress per cloud): an output that is not a
-/// map file is refused before anything is read; an error inserting a cloud names it.
+/// map file, or that cannot be written (no such folder, not writable, a folder), is
+/// refused before anything is read; an error inserting a cloud names it.
 pub fn run_voxelize(job: &VoxelizeJob, progress: Progress<'_>) -> Result<VoxelizeRun> {
     let start = Instant::now();
     MapFormat::of_output(&job.output)?;
+    crate::file::check_output(&job.output, "map")?;
     let poses = cloud_poses(&job.poses, &job.clouds)?;
     let mut map = OccupancyList::new(job.resolution)?;
     let mut total = InsertStats::default();

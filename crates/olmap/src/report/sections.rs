@@ -2,8 +2,6 @@
 //! per scan (thesis (7.4)), the position-error histogram (thesis Figure 6.11), a
 //! parameters table, and where the page is written.
 
-use std::path::{Path, PathBuf};
-
 use nalgebra::Point3;
 
 use super::HtmlReport;
@@ -136,19 +134,4 @@ pub fn parameters(report: &mut HtmlReport, rows: &[(&str, String)]) {
     report.key_values(rows);
 }
 
-/// The HTML report's path beside a JSON report: the same name with the extension `html`
-/// (`NAME.report.html` when the JSON file itself ends in `.html`).
-pub fn html_path_beside(json_path: &Path) -> PathBuf {
-    let mut path = json_path.with_extension("html");
-    if path == json_path {
-        path = json_path.with_extension("report.html");
-    }
-    path
-}
-
-/// Writes the report beside `json_path` (see [`html_path_beside`]); returns its path.
-pub fn write_beside(report: &HtmlReport, json_path: &Path) -> Result<PathBuf> {
-    let path = html_path_beside(json_path);
-    report.write(&path)?;
-    Ok(path)
-}
+pub use crate::file::html_path_beside;

@@ -9,11 +9,14 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::files::{read_dataset, write_dataset};
+use super::files::{read_dataset, write_dataset_into};
 use super::{simulate, OdometryNoise, SimConfig, WorldKind};
 use crate::error::{Error, Result};
+use crate::file::OutputSet;
 use crate::progress::{Progress, Stage};
-use crate::team::{run_team_pipeline, ScanStore, TeamJob, TeamParams, TeamReport, TeamRun};
+use crate::team::{
+    declare_team_outputs, team_run_into, ScanStore, TeamJob, TeamParams, TeamReport, TeamRun,
+};
 
 /// What the demo runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -73,8 +76,9 @@ pub struct DemoRun {
     pub dataset_dir: PathBuf,
 }
 
-/// Removes `dir` only if it is a dataset an earlier demo wrote (its manifest reads as one).
-fn clear_old_dataset(dir: &Path) -> Result<()> {
+/// Refuses to replace `dir` unless it is missing or a dataset an earlier demo wrote (its
+/// manifest reads as one).
+fn check_old_dataset(dir: &Path) -> Result<()> {
     if !dir.exists() {
         return Ok(());
     }
@@ -84,10 +88,13 @@ fn clear_old_dataset(dir: &Path) -> Result<()> {
             dir.display()
         ))
     })?;
-    std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))
+    Ok(())
 }
 
-/// Runs the demo ([`Stage::Simulate`], then the team pipeline's stages).
+/// Runs the demo ([`Stage::Simulate`], then the team pipeline's stages). Every output is
+/// checked before simulating, and the dataset and the team run's files are written as one
+/// [`OutputSet`]: a failed or killed demo leaves the older demo's outputs (or nothing),
+/// never a mixture.
 pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> {
     if config.robots < 1 || config.scans_per_robot < 2 {
         return Err(Error::InvalidArgument(
@@ -95,7 +102,11 @@ pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> 
         ));
     }
     let start = Instant::now();
-    std::fs::create_dir_all(&config.out).map_err(|e| Error::io(&config.out, e))?;
+    let mut set = OutputSet::new();
+    declare_team_outputs(&mut set, &config.out, true)?;
+    let dataset_dir = config.out.join("dataset");
+    check_old_dataset(&dataset_dir)?;
+    set.dir(&dataset_dir, "dataset folder")?;
     let sim = SimConfig {
         world: WorldKind::Lab,
         seed: config.seed,
@@ -105,9 +116,7 @@ pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> 
         ..Default::default()
     };
     let data = simulate(&sim, |done, total| progress(Stage::Simulate, done, total))?;
-    let dataset_dir = config.out.join("dataset");
-    clear_old_dataset(&dataset_dir)?;
-    write_dataset(&dataset_dir, &data)?;
+    write_dataset_into(&set.path(&dataset_dir)?, &data)?;
     let simulate_seconds = start.elapsed().as_secs_f64();
 
     // Every robot's own store, merged as the robots would when they meet (§6.3.2).
@@ -122,7 +131,8 @@ pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> 
         ));
     }
     let truth = data.truth_list(&store);
-    let run = run_team_pipeline(
+    let run = team_run_into(
+        &mut set,
         &TeamJob {
             store: &store,
             truth: Some(&truth),
@@ -132,6 +142,7 @@ pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> 
         },
         progress,
     )?;
+    set.commit()?;
     let report = DemoReport {
         team: run.report.clone(),
         dataset: dataset_dir.display().to_string(),

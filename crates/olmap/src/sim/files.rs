@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 use super::Sighting;
 use crate::error::{Error, ParseError, Result};
 use crate::file::text::json_message;
+use crate::file::OutputSet;
 use crate::geometry::PoseList;
 
 /// The `format` value of a dataset manifest.
@@ -291,10 +292,21 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
 }
 
 /// Writes a simulated dataset into `dir`, which must not exist or be empty. The folder is
-/// written under a temporary name beside it and renamed when complete: it appears whole
-/// or not at all. Same dataset, same bytes.
+/// written in a staging folder beside it and renamed when complete (an
+/// [`OutputSet`](crate::file::OutputSet)): it appears whole or not at all. Same dataset,
+/// same bytes.
 pub fn write_dataset(dir: impl AsRef<Path>, data: &super::SimDataset) -> Result<()> {
     let dir = dir.as_ref();
+    check_dataset_output(dir)?;
+    let mut set = OutputSet::new();
+    set.dir(dir, "dataset folder")?;
+    write_dataset_into(&set.path(dir)?, data)?;
+    set.commit()
+}
+
+/// Checks, before simulating, that [`write_dataset`] can write to `dir`: it does not exist
+/// or is empty, and its parent folder exists and is writable.
+pub fn check_dataset_output(dir: &Path) -> Result<()> {
     if dir.exists() {
         let empty = std::fs::read_dir(dir)
             .map_err(|e| Error::io(dir, e))?
@@ -307,28 +319,11 @@ pub fn write_dataset(dir: impl AsRef<Path>, data: &super::SimDataset) -> Result<
             )));
         }
     }
-    let name = dir
-        .file_name()
-        .ok_or_else(|| Error::InvalidArgument(format!("{}: not a folder name", dir.display())))?;
-    let mut tmp_name = name.to_os_string();
-    tmp_name.push(format!(".olmap-tmp-{}", std::process::id()));
-    let tmp = dir.with_file_name(tmp_name);
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
-    }
-    let result = write_dataset_into(&tmp, data).and_then(|()| {
-        if dir.exists() {
-            std::fs::remove_dir(dir).map_err(|e| Error::io(dir, e))?;
-        }
-        std::fs::rename(&tmp, dir).map_err(|e| Error::io(dir, e))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_dir_all(&tmp);
-    }
-    result
+    OutputSet::new().dir(dir, "dataset folder")
 }
 
-fn write_dataset_into(dir: &Path, data: &super::SimDataset) -> Result<()> {
+/// Writes the dataset's files into the folder `dir` (existing or not), each atomically.
+pub(crate) fn write_dataset_into(dir: &Path, data: &super::SimDataset) -> Result<()> {
     let mkdir = |p: &Path| std::fs::create_dir_all(p).map_err(|e| Error::io(p, e));
     mkdir(dir)?;
     let options = crate::io::WriteOptions {

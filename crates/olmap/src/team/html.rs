@@ -2,7 +2,7 @@
 //! of every robot's own map, the error histogram (thesis Figure 6.11), the entropy per
 //! scan, the parameters and timings.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::report::{ErrorSummaryReport, SoloRun, TeamReport};
 use super::{ScanStore, TeamMap};
@@ -92,14 +92,15 @@ fn parameter_rows(
     ]
 }
 
-/// Writes the HTML report of a team run beside `json_path`; returns its path.
+/// Writes the HTML report of a team run to `html_path` (conventionally beside
+/// `report.json`: [`crate::file::html_path_beside`]).
 pub fn write_team_html(
     store: &ScanStore,
     team: &TeamMap,
     solo: &[SoloRun],
     report: &TeamReport,
-    json_path: &Path,
-) -> Result<PathBuf> {
+    html_path: &Path,
+) -> Result<()> {
     let mut page = HtmlReport::new("olmap team report");
     sections::parameters(&mut page, &parameter_rows(store, team, solo, report));
     page.heading("Team map");
@@ -138,5 +139,5 @@ pub fn write_team_html(
     )?;
     page.heading("Report (report.json)");
     page.json(report);
-    sections::write_beside(&page, json_path)
+    page.write(html_path)
 }

@@ -22,6 +22,11 @@ pub use mutual::{
     MutualObservation, MutualParams, MutualReject,
 };
 pub use mutual_report::{observation_of_fix, MutualReport};
+pub(crate) use pipeline::{declare_team_outputs, team_run_into};
 pub use pipeline::{run_team_pipeline, TeamJob, TeamRun};
 pub use report::{SoloRun, TeamReport, TEAM_REPORT_FORMAT, TEAM_REPORT_VERSION};
-pub use store::{ScanStore, StoredScan, StoredSighting, STORE_MAGIC, STORE_VERSION};
+pub use store::{
+    merge_store_files, salvage_store_file, store_info, SalvageReport, ScanStore, StoreDamage,
+    StoreInfo, StoreMergeInput, StoreMergeReport, StoreRobotInfo, StoreSalvageReport, StoredScan,
+    StoredSighting, RECORD_MARKER, STORE_MAGIC, STORE_VERSION,
+};

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use super::report::{SoloRun, TeamReport};
 use super::{map_solo, map_team, ScanStore, TeamMap, TeamParams};
 use crate::error::{Error, Result};
-use crate::file::write_atomic;
+use crate::file::{html_path_beside, write_atomic, OutputSet};
 use crate::geometry::PoseList;
 use crate::mapping::evaluate;
 use crate::occupancy::{self, OccupancyList};
@@ -43,41 +43,64 @@ pub struct TeamRun {
 
 /// Writes the joint map as `.olm` (checked to read back equal), `.bt` and `.ply` (voxel
 /// centres with counts as intensity, coloured by height with the `render` feature).
-fn write_maps(out: &Path, stem: &str, map: &OccupancyList) -> Result<()> {
-    let olm = out.join(format!("{stem}.olm"));
-    occupancy::write_map(&olm, map)?;
-    if occupancy::read_map(&olm)?.map != *map {
+fn write_maps(olm: &Path, bt: &Path, ply: &Path, map: &OccupancyList) -> Result<()> {
+    occupancy::write_map(olm, map)?;
+    if occupancy::read_map(olm)?.map != *map {
         return Err(Error::Write {
-            path: olm,
+            path: olm.to_path_buf(),
             format: "olmap .olm",
             reason: "the map read back differs".into(),
         });
     }
-    occupancy::write_map(out.join(format!("{stem}.bt")), map)?;
+    occupancy::write_map(bt, map)?;
     #[cfg(feature = "render")]
     let cloud = crate::render::height_coloured_cloud(map, None);
     #[cfg(not(feature = "render"))]
     let cloud = map.to_cloud();
-    crate::io::write_cloud(
-        out.join(format!("{stem}.ply")),
-        &cloud,
-        &crate::io::WriteOptions::default(),
-    )
+    crate::io::write_cloud(ply, &cloud, &crate::io::WriteOptions::default())
 }
 
-fn create_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+/// The files a team run writes into its output folder, with their formats.
+const TEAM_FILES: [(&str, &str); 6] = [
+    ("team.olm", "olmap .olm"),
+    ("team.bt", "OctoMap .bt"),
+    ("team.ply", "PLY"),
+    ("team_poses.txt", "pose list"),
+    ("team.store", "olmap scan store"),
+    ("report.json", "JSON"),
+];
+
+/// Declares the outputs of a team run into `out` (created if missing) in `set`, each
+/// checked now: the files of [`run_team_pipeline`], `solo/` (replaced whole, or removed
+/// when `solo` is off: an older run's solo maps would not match the new report), and
+/// `report.html` (removed without the `render` feature, for the same reason).
+pub(crate) fn declare_team_outputs(set: &mut OutputSet, out: &Path, solo: bool) -> Result<()> {
+    set.folder(out)?;
+    for (name, format) in TEAM_FILES {
+        set.file(&out.join(name), format)?;
+    }
+    let html = html_path_beside(&out.join("report.json"));
+    if cfg!(feature = "render") {
+        set.file(&html, "HTML report")?;
+    } else {
+        set.remove(&html)?;
+    }
+    let solo_dir = out.join("solo");
+    if solo {
+        set.dir(&solo_dir, "solo maps folder")?;
+    } else {
+        set.remove(&solo_dir)?;
+    }
+    Ok(())
 }
 
-/// Maps every robot alone ([`Stage::SoloMaps`]) and writes `OUT/solo/ROBOT.olm` and
-/// `ROBOT_poses.txt`.
-fn solo_runs(job: &TeamJob<'_>, progress: Progress<'_>) -> Result<Vec<SoloRun>> {
+/// Maps every robot alone ([`Stage::SoloMaps`]) and writes `ROBOT.olm` and
+/// `ROBOT_poses.txt` into `dir`.
+fn solo_runs(job: &TeamJob<'_>, dir: &Path, progress: Progress<'_>) -> Result<Vec<SoloRun>> {
     let total = job.store.len();
     let runs = map_solo(job.store, job.params, |done, _| {
         progress(Stage::SoloMaps, done, total)
     })?;
-    let dir = job.out.join("solo");
-    create_dir(&dir)?;
     let mut out = Vec::new();
     for (robot, map) in runs {
         let name = job.store.robot_name(robot);
@@ -97,32 +120,55 @@ fn solo_runs(job: &TeamJob<'_>, progress: Progress<'_>) -> Result<Vec<SoloRun>> 
 /// Runs a [`TeamJob`]: the team map ([`Stage::TeamMap`]) written as `OUT/team.olm`,
 /// `.ply`, `.bt` with `team_poses.txt` and the merged `team.store`; with `solo`, every
 /// robot alone under `OUT/solo/`; then `report.json` and (with the `render` feature)
-/// `report.html`. Every file is written atomically.
+/// `report.html`. Every output path is checked before mapping, and the outputs are written
+/// as one [`OutputSet`]: after an error or a kill the folder holds the older run's complete
+/// set (or nothing), never a mixture; an older `solo/` is removed by a run without it.
 pub fn run_team_pipeline(job: &TeamJob<'_>, progress: Progress<'_>) -> Result<TeamRun> {
-    create_dir(job.out)?;
+    let mut set = OutputSet::new();
+    declare_team_outputs(&mut set, job.out, job.solo)?;
+    let run = team_run_into(&mut set, job, progress)?;
+    set.commit()?;
+    Ok(run)
+}
+
+/// [`run_team_pipeline`] writing into a set declared by [`declare_team_outputs`], not
+/// committed: for pipelines with more outputs (the demo's dataset).
+pub(crate) fn team_run_into(
+    set: &mut OutputSet,
+    job: &TeamJob<'_>,
+    progress: Progress<'_>,
+) -> Result<TeamRun> {
     let total = job.store.len();
     let team = map_team(job.store, job.params, |done, _| {
         progress(Stage::TeamMap, done, total)
     })?;
-    write_maps(job.out, "team", &team.build.map)?;
+    let staged = |set: &mut OutputSet, name: &str| set.path(&job.out.join(name));
+    write_maps(
+        &staged(set, "team.olm")?,
+        &staged(set, "team.bt")?,
+        &staged(set, "team.ply")?,
+        &team.build.map,
+    )?;
     let team_poses = team.poses();
-    team_poses.write_path(job.out.join("team_poses.txt"))?;
-    job.store.write(job.out.join("team.store"))?;
+    team_poses.write_path(staged(set, "team_poses.txt")?)?;
+    job.store.write(staged(set, "team.store")?)?;
     let team_eval = job.truth.map(|t| evaluate(&team_poses, t)).transpose()?;
     let solo = if job.solo {
-        solo_runs(job, progress)?
+        let dir = staged(set, "solo")?;
+        solo_runs(job, &dir, progress)?
     } else {
         Vec::new()
     };
     let report = TeamReport::new(job.store, &team, team_eval.as_ref(), &solo, job.solo);
-    let path = job.out.join("report.json");
-    write_atomic(&path, "JSON", |w| {
+    write_atomic(&staged(set, "report.json")?, "JSON", |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
     })?;
     #[cfg(feature = "render")]
-    let html = Some(super::html::write_team_html(
-        job.store, &team, &solo, &report, &path,
-    )?);
+    let html = {
+        let html = html_path_beside(&job.out.join("report.json"));
+        super::html::write_team_html(job.store, &team, &solo, &report, &set.path(&html)?)?;
+        Some(html)
+    };
     #[cfg(not(feature = "render"))]
     let html = None;
     Ok(TeamRun {

@@ -249,6 +249,34 @@ fn audit_counts_claimed_by_headers_allocate_nothing() {
         Err(ParseError::Truncated(m)) => assert!(m.contains("key"), "{m}"),
         other => panic!("{other:?}"),
     }
+    // .olm version 2 (chunks of 1024 voxels, a checksum over the header): 10^12 voxels
+    // announced, the file ends after the header.
+    let mut olm = occupancy::OLM_MAGIC.to_vec();
+    olm.extend_from_slice(&2u32.to_le_bytes());
+    olm.extend_from_slice(&0.1f64.to_le_bytes());
+    olm.extend_from_slice(&1_000_000_000_000u64.to_le_bytes());
+    olm.extend_from_slice(&1024u32.to_le_bytes());
+    let crc = olmap::file::crc32::crc32(&olm);
+    olm.extend_from_slice(&crc.to_le_bytes());
+    match OccupancyList::read_olm(&olm[..]) {
+        Err(ParseError::Truncated(m)) => {
+            assert!(m.contains("byte 36") && m.contains("chunk length"), "{m}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // Its first chunk claims 20 KiB but the file ends 3 bytes into it.
+    olm.extend_from_slice(&20_000u32.to_le_bytes());
+    olm.extend_from_slice(&[1, 1, 1]);
+    match OccupancyList::read_olm(&olm[..]) {
+        Err(ParseError::Invalid {
+            at: Location::Byte(36),
+            reason,
+        }) => assert!(
+            reason.contains("chunk 0") && reason.contains("runs past the end"),
+            "{reason}"
+        ),
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]
@@ -278,9 +306,16 @@ fn audit_olm_and_scan_graph_readers_stream() {
     let mut bytes = Vec::new();
     map.write_olm(&mut bytes).unwrap();
     assert_eq!(OccupancyList::read_olm(&bytes[..]).unwrap(), map);
+    let end = bytes.len() as u64;
     bytes.extend_from_slice(b"tail");
     match OccupancyList::read_olm(&bytes[..]) {
-        Err(ParseError::Malformed(m)) => assert!(m.contains("4 unexpected bytes"), "{m}"),
+        Err(ParseError::Invalid {
+            at: Location::Byte(b),
+            reason,
+        }) => {
+            assert_eq!(b, end);
+            assert!(reason.contains("4 unexpected bytes"), "{reason}");
+        }
         other => panic!("{other:?}"),
     }
 }

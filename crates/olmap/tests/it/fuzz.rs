@@ -166,6 +166,7 @@ fn fuzz_short_pass_over_every_reader() {
         "3DTK .pose",
         "3DTK .frames",
         "scan store",
+        "scan store salvage",
         "mirror log",
         "laser scan CSV",
         "laser scan JSON",

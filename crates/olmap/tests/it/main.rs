@@ -6,6 +6,7 @@ mod align_synthetic;
 mod audit_readers;
 mod bad_input;
 mod beacon;
+mod data_safety;
 mod fuzz;
 mod grid2d;
 mod layers;

@@ -1,5 +1,6 @@
-//! The scan-store file (`*.olstore`): the binary writer and reader of a whole
-//! [`ScanStore`] (magic, version, names, records, CRC-32), format on [`ScanStore::write`].
+//! The scan-store file (`*.olstore`, `*.store`): the binary writer and reader of a whole
+//! [`ScanStore`] (magic, version, names, records each framed with its own CRC-32), format
+//! on [`ScanStore::write`]. Version 1 (one CRC-32 over the whole file) is still read.
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -19,14 +20,21 @@ use crate::geometry::Pose;
 
 /// The 8 bytes every scan-store file starts with.
 pub const STORE_MAGIC: &[u8; 8] = b"OLSTORE\n";
-/// The scan-store file version this olmap writes and reads.
-pub const STORE_VERSION: u32 = 1;
-const FORMAT: &str = "olmap scan store";
+/// The scan-store file version this olmap writes (it reads this one and version 1).
+pub const STORE_VERSION: u32 = 2;
+/// The first version: no per-record checksums (read, never written).
+pub(super) const STORE_VERSION_1: u32 = 1;
+/// The 8 bytes that open every record frame of a version-2 store: after damage, a salvage
+/// reader finds the next record by them.
+pub const RECORD_MARKER: &[u8; 8] = b"OLRECORD";
+/// Bytes of a record frame around its body: marker, length, CRC-32.
+pub(super) const FRAME_OVERHEAD: usize = 8 + 8 + 4;
+pub(super) const FORMAT: &str = "olmap scan store";
 const ATTR_INTENSITY: u8 = 1;
 const ATTR_NORMALS: u8 = 2;
 const ATTR_COLORS: u8 = 4;
-/// Bytes of the smallest possible record (no odometry, sightings or points).
-const MIN_RECORD: u64 = 4 + 4 + 8 + 1 + 4 + 24 + 1 + 8;
+/// Bytes of the smallest possible record body (no odometry, sightings or points).
+pub(super) const MIN_RECORD: u64 = 4 + 4 + 8 + 1 + 4 + 24 + 1 + 8;
 /// Bytes of one stored sighting.
 const SIGHTING_BYTES: u64 = 4 + 24 + 24 + 1;
 
@@ -34,37 +42,52 @@ impl ScanStore {
     /// Writes the store as one file, atomically (a temporary file beside `path` is renamed
     /// into place when complete). Same store, same bytes.
     ///
-    /// # File format (version 1)
-    /// One file holds a whole store, conventionally named `*.olstore`. All numbers are
-    /// little-endian; `f32`/`f64` are IEEE 754, written bit for bit, so a store read back is
-    /// identical to the one written.
+    /// # File format (version 2)
+    /// One file holds a whole store, conventionally named `*.olstore` (`team.store` in a
+    /// team run's folder). All numbers are little-endian; `f32`/`f64` are IEEE 754, written
+    /// bit for bit, so a store read back is identical to the one written. Every record
+    /// carries its own checksum, so that damage costs only the records it touches: the
+    /// reader names the damaged record and its byte offset, and a salvage reader
+    /// ([`ScanStore::read_salvaged`]) recovers every other record.
     /// ```text
     /// magic      8 bytes  "OLSTORE\n"
-    /// version    u32      1
+    /// version    u32      2
     /// names      u32      number of named robots, then per robot in ascending id order:
     ///              robot u32, length u32 (>= 1), UTF-8 name bytes
-    /// records    u64      number of scan records, then per record in ascending (robot, seq) order:
-    ///   robot      u32
-    ///   seq        u32      the robot's scan number
-    ///   time       f64      seconds, finite
-    ///   odometry   u8       0 = none, 1 = present, then T_odom_robot as
-    ///              tx ty tz f64, then the unit quaternion i j k w f64 (|q| within 1e-6 of 1)
-    ///   sightings  u32      count, then per sighting:
-    ///              target u32, range f64, bearing f64, elevation f64,
-    ///              beacon x y z f64 (in the observer's robot frame), mutual u8 (0 or 1)
-    ///   origin     3 x f64  the sensor origin in the robot frame
-    ///   attributes u8       bit 0 intensity, bit 1 normals, bit 2 colours (other bits 0)
-    ///   points     u64      count n, then
-    ///              n x (x y z f32)                 positions, finite
-    ///              n x f32                         intensity, if bit 0
-    ///              n x (nx ny nz f32)              normals, if bit 1
-    ///              n x (r g b u8)                  colours, if bit 2
-    /// crc32      u32      CRC-32 (IEEE) of every byte before it
+    /// records    u64      number of scan records
+    /// header crc u32      CRC-32 (IEEE) of every byte before it
+    /// then per record, in ascending (robot, seq) order, one frame:
+    ///   marker   8 bytes  "OLRECORD"
+    ///   length   u64      bytes of the body
+    ///   body     length bytes:
+    ///     robot      u32
+    ///     seq        u32      the robot's scan number
+    ///     time       f64      seconds, finite
+    ///     odometry   u8       0 = none, 1 = present, then T_odom_robot as
+    ///                tx ty tz f64, then the unit quaternion i j k w f64 (|q| within 1e-6 of 1)
+    ///     sightings  u32      count, then per sighting:
+    ///                target u32, range f64, bearing f64, elevation f64,
+    ///                beacon x y z f64 (in the observer's robot frame), mutual u8 (0 or 1)
+    ///     origin     3 x f64  the sensor origin in the robot frame
+    ///     attributes u8       bit 0 intensity, bit 1 normals, bit 2 colours (other bits 0)
+    ///     points     u64      count n, then
+    ///                n x (x y z f32)                 positions, finite
+    ///                n x f32                         intensity, if bit 0
+    ///                n x (nx ny nz f32)              normals, if bit 1
+    ///                n x (r g b u8)                  colours, if bit 2
+    ///   crc      u32      CRC-32 (IEEE) of the length and the body
     /// ```
-    /// Nothing may follow the checksum. The reader checks every count against the bytes left
-    /// before allocating, the ordering of names and records, every flag, that positions,
-    /// poses, times and sightings are finite, and the checksum; any violation is an
-    /// [`Error::Read`] naming the file, with the byte offset where one applies.
+    /// Nothing may follow the last record. The reader checks the header's checksum, then
+    /// per record the marker, that the length fits the file, the checksum, and that the
+    /// body fills the length exactly; every count against the bytes left before
+    /// allocating, the ordering of names and records, every flag, that positions, poses,
+    /// times and sightings are finite. Any violation is an [`Error::Read`] naming the file
+    /// with the byte offset (for a damaged record: where its frame starts, and its index).
+    ///
+    /// # Version 1 (read, no longer written)
+    /// The same header without its checksum, the record bodies back to back without frames,
+    /// and one CRC-32 of every byte before it at the end: one damaged byte anywhere and the
+    /// whole file is refused (its salvage reader can only return unverified records).
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
         crate::file::write_atomic(path.as_ref(), FORMAT, |w| self.write_to(w))
     }
@@ -76,7 +99,6 @@ impl ScanStore {
 
     /// Writes the store to a stream in the file format of [`ScanStore::write`].
     pub fn write_to<W: Write>(&self, mut w: W) -> std::io::Result<()> {
-        let mut crc = Crc32::default();
         let mut buf = Vec::with_capacity(1 << 16);
         buf.extend_from_slice(STORE_MAGIC);
         buf.extend_from_slice(&STORE_VERSION.to_le_bytes());
@@ -87,15 +109,22 @@ impl ScanStore {
             buf.extend_from_slice(name.as_bytes());
         }
         buf.extend_from_slice(&(self.scans.len() as u64).to_le_bytes());
+        let crc = crate::file::crc32::crc32(&buf);
+        buf.extend_from_slice(&crc.to_le_bytes());
+        w.write_all(&buf)?;
         for scan in self.scans.values() {
-            encode_scan(scan, &mut buf)?;
-            crc.update(&buf);
-            w.write_all(&buf)?;
             buf.clear();
+            buf.extend_from_slice(RECORD_MARKER);
+            buf.extend_from_slice(&[0; 8]);
+            encode_scan(scan, &mut buf)?;
+            let length = (buf.len() - 16) as u64;
+            buf[8..16].copy_from_slice(&length.to_le_bytes());
+            let mut crc = Crc32::default();
+            crc.update(&buf[8..]);
+            buf.extend_from_slice(&crc.finish().to_le_bytes());
+            w.write_all(&buf)?;
         }
-        crc.update(&buf);
-        buf.extend_from_slice(&crc.finish().to_le_bytes());
-        w.write_all(&buf)
+        Ok(())
     }
 
     /// Reads a store from a stream in the file format (no path attached to errors).
@@ -231,19 +260,21 @@ fn flag(r: &mut ByteCursor<'_>, what: &str) -> Result<bool, ParseError> {
     }
 }
 
-fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
-    let mut r = ByteCursor::new(data);
+/// Magic, version and names: the part of the header both versions share.
+pub(super) fn decode_names(
+    r: &mut ByteCursor<'_>,
+) -> Result<(u32, BTreeMap<u32, String>), ParseError> {
     if r.take(8, "magic")? != STORE_MAGIC {
         return Err(at(0, "not an olmap scan store (bad magic bytes)"));
     }
     let version = r.u32("version")?;
-    if version != STORE_VERSION {
+    if version != STORE_VERSION && version != STORE_VERSION_1 {
         return Err(ParseError::Unsupported(format!(
-            "scan store version {version} (this reader knows {STORE_VERSION})"
+            "scan store version {version} (this reader knows {STORE_VERSION_1} and {STORE_VERSION})"
         )));
     }
     let n_names = r.u32("name count")?;
-    let n_names = check_count(&r, n_names as u64, 9, "robot names")?;
+    let n_names = check_count(r, n_names as u64, 9, "robot names")?;
     let mut names = BTreeMap::new();
     for _ in 0..n_names {
         let pos = r.pos();
@@ -252,7 +283,7 @@ fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
             return Err(at(pos, "robot names are not in ascending robot order"));
         }
         let len = r.u32("name length")?;
-        let len = check_count(&r, len as u64, 1, "name bytes")?;
+        let len = check_count(r, len as u64, 1, "name bytes")?;
         let name_pos = r.pos();
         let bytes = r.take(len, "robot name")?;
         let name = std::str::from_utf8(bytes)
@@ -260,7 +291,79 @@ fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
         check_name(name).map_err(|e| at(name_pos, e))?;
         names.insert(robot, name.to_string());
     }
+    Ok((version, names))
+}
+
+pub(super) fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
+    let mut r = ByteCursor::new(data);
+    let (version, names) = decode_names(&mut r).map_err(|e| {
+        // In a version-2 file a header that does not parse is a damaged one (its checksum
+        // cannot even be found); elsewhere the error says what is wrong.
+        let v2 = data.get(8..12) == Some(&STORE_VERSION.to_le_bytes()[..])
+            && data.starts_with(STORE_MAGIC);
+        if v2 {
+            at(0, format!("the header is damaged: {e}"))
+        } else {
+            e
+        }
+    })?;
     let n_records = r.u64("record count")?;
+    if version == STORE_VERSION_1 {
+        return decode_v1(data, r, names, n_records);
+    }
+    let header_end = r.pos();
+    let stored = r.u32("header checksum")?;
+    let computed = crate::file::crc32::crc32(&data[..header_end]);
+    if computed != stored {
+        return Err(at(
+            0,
+            format!(
+                "the header (bytes 0..{}) is damaged: checksum mismatch (stored {stored:08x}, \
+                 computed {computed:08x})",
+                r.pos()
+            ),
+        ));
+    }
+    let min_frame = MIN_RECORD + FRAME_OVERHEAD as u64;
+    let n_records = check_count(&r, n_records, min_frame, "scan records")?;
+    let mut scans = BTreeMap::new();
+    let mut pos = r.pos();
+    for index in 0..n_records {
+        let frame =
+            check_frame(data, pos).map_err(|fault| fault.error(index as u64, pos, data.len()))?;
+        let scan = decode_body(data, &frame).map_err(|e| in_record(e, index as u64, pos))?;
+        let key = (scan.robot, scan.seq);
+        if scans.keys().next_back().is_some_and(|&last| key <= last) {
+            return Err(at(
+                pos,
+                format!(
+                    "record {index}: scan {} of robot {} is out of key order (or repeated)",
+                    scan.seq, scan.robot
+                ),
+            ));
+        }
+        scans.insert(key, scan);
+        pos = frame.end;
+    }
+    if pos != data.len() {
+        return Err(at(
+            pos,
+            format!(
+                "{} unexpected bytes after the last of {n_records} records",
+                data.len() - pos
+            ),
+        ));
+    }
+    Ok(ScanStore { scans, names })
+}
+
+/// Version 1: record bodies back to back, one CRC-32 of the whole file at the end.
+fn decode_v1(
+    data: &[u8],
+    mut r: ByteCursor<'_>,
+    names: BTreeMap<u32, String>,
+    n_records: u64,
+) -> Result<ScanStore, ParseError> {
     let n_records = check_count(&r, n_records, MIN_RECORD, "scan records")?;
     let mut scans = BTreeMap::new();
     for _ in 0..n_records {
@@ -283,7 +386,9 @@ fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
     let computed = crate::file::crc32::crc32(&data[..body_end]);
     if computed != stored {
         return Err(ParseError::Malformed(format!(
-            "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is damaged"
+            "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is \
+             damaged somewhere (a version-1 store has one checksum for the whole file; \
+             `olmap store salvage` recovers what still reads)"
         )));
     }
     if r.remaining() != 0 {
@@ -295,7 +400,110 @@ fn decode_store(data: &[u8]) -> Result<ScanStore, ParseError> {
     Ok(ScanStore { scans, names })
 }
 
-fn decode_scan(r: &mut ByteCursor<'_>) -> Result<StoredScan, ParseError> {
+/// Where a verified record frame lies in the file.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Frame {
+    /// First byte of the body.
+    pub body_start: usize,
+    /// One past the body's last byte.
+    pub body_end: usize,
+    /// One past the frame's last byte (its checksum).
+    pub end: usize,
+}
+
+/// Why no verified frame starts at a position.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum FrameFault {
+    /// The 8 marker bytes are not there.
+    NoMarker,
+    /// The length runs past the end of the file.
+    Overrun,
+    /// The checksum does not match.
+    Checksum {
+        /// One past the frame's last byte, as its length says.
+        end: usize,
+    },
+}
+
+impl FrameFault {
+    /// The reader's error for record `index` whose frame should start at `pos`.
+    fn error(self, index: u64, pos: usize, len: usize) -> ParseError {
+        match self {
+            FrameFault::NoMarker if pos >= len => ParseError::Truncated(format!(
+                "record {index} should start at byte {pos}, the end of the file"
+            )),
+            FrameFault::NoMarker => at(
+                pos,
+                format!("record {index}: no record marker: the record is damaged"),
+            ),
+            FrameFault::Overrun => ParseError::Truncated(format!(
+                "record {index} at byte {pos} runs past the end of the file at byte {len} (the \
+                 file was cut, or the record's length is damaged)"
+            )),
+            FrameFault::Checksum { end } => at(
+                pos,
+                format!("record {index} (bytes {pos}..{end}) is damaged: checksum mismatch"),
+            ),
+        }
+    }
+}
+
+/// The frame starting at `pos`, if its marker, length and checksum hold.
+pub(super) fn check_frame(data: &[u8], pos: usize) -> Result<Frame, FrameFault> {
+    let rest = data.get(pos..).unwrap_or(&[]);
+    if rest.len() < 8 || &rest[..8] != RECORD_MARKER {
+        return Err(FrameFault::NoMarker);
+    }
+    if rest.len() < 16 {
+        return Err(FrameFault::Overrun);
+    }
+    let length = u64::from_le_bytes(rest[8..16].try_into().expect("8 bytes"));
+    let body_len = usize::try_from(length)
+        .ok()
+        .filter(|&n| n <= rest.len().saturating_sub(FRAME_OVERHEAD))
+        .ok_or(FrameFault::Overrun)?;
+    let body_end = pos + 16 + body_len;
+    let end = body_end + 4;
+    let stored = u32::from_le_bytes(data[body_end..end].try_into().expect("4 bytes"));
+    if crate::file::crc32::crc32(&data[pos + 8..body_end]) != stored {
+        return Err(FrameFault::Checksum { end });
+    }
+    Ok(Frame {
+        body_start: pos + 16,
+        body_end,
+        end,
+    })
+}
+
+/// Decodes a verified frame's body, which must fill it exactly.
+pub(super) fn decode_body(data: &[u8], frame: &Frame) -> Result<StoredScan, ParseError> {
+    let mut r = ByteCursor::new_at(&data[..frame.body_end], frame.body_start);
+    let scan = decode_scan(&mut r)?;
+    if r.remaining() != 0 {
+        return Err(at(
+            r.pos(),
+            format!(
+                "{} bytes of the record are left over after its content",
+                r.remaining()
+            ),
+        ));
+    }
+    Ok(scan)
+}
+
+/// Names the record in a content error found inside a verified frame.
+fn in_record(e: ParseError, index: u64, pos: usize) -> ParseError {
+    match e {
+        ParseError::Invalid { at, reason } => ParseError::Invalid {
+            at,
+            reason: format!("record {index} (at byte {pos}): {reason}"),
+        },
+        ParseError::Truncated(m) => at(pos, format!("record {index}: the content ends early: {m}")),
+        other => other,
+    }
+}
+
+pub(super) fn decode_scan(r: &mut ByteCursor<'_>) -> Result<StoredScan, ParseError> {
     let robot = r.u32("robot id")?;
     let seq = r.u32("scan number")?;
     let pos = r.pos();

@@ -21,7 +21,16 @@
 //! every number in them has the same bit pattern (so `-0.0` and `0.0` differ, and a NaN
 //! intensity equals itself); anything else under the same key is a conflict.
 //!
-//! The file format is documented on [`ScanStore::write`] (public, as this module is not).
+//! The file format is documented on [`ScanStore::write`] (public, as this module is not):
+//! simple, versioned, little-endian, each record framed with a marker, its length and its
+//! own CRC-32 (version 2), so that a damaged byte costs the record it is in, not the
+//! store. [`ScanStore::read`] refuses any damage, naming the record and its byte offset;
+//! [`ScanStore::read_salvaged`] recovers every record whose checksum holds and reports
+//! the damaged stretches ([`SalvageReport`]). Version-1 files (one CRC-32 for the whole
+//! file) are still read. Files as a front end sees them: [`store_info`],
+//! [`merge_store_files`], [`salvage_store_file`] (`olmap store info | merge | salvage`).
+//! Live stores may move to an embedded database; this file stays the export and
+//! interchange format.
 //!
 //! The store is written with [`crate::file::write_atomic`]: a temporary file beside the
 //! target is renamed into place when complete.
@@ -29,6 +38,8 @@
 mod checks;
 mod codec;
 mod identity;
+mod inspect;
+mod salvage;
 
 use std::collections::BTreeMap;
 
@@ -38,8 +49,13 @@ use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::geometry::Pose;
 use checks::{check_name, check_scan};
-pub use codec::{STORE_MAGIC, STORE_VERSION};
+pub use codec::{RECORD_MARKER, STORE_MAGIC, STORE_VERSION};
 use identity::{same_option_pose, same_scan, same_sightings};
+pub use inspect::{
+    merge_store_files, salvage_store_file, store_info, StoreInfo, StoreMergeInput,
+    StoreMergeReport, StoreRobotInfo, StoreSalvageReport,
+};
+pub use salvage::{SalvageReport, StoreDamage};
 
 /// One beacon sighting made by the robot when it took the scan.
 #[derive(Debug, Clone, PartialEq)]
