@@ -119,7 +119,8 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // Each cause once: olmap's errors name their cause in their own message.
+            eprintln!("error: {}", olmap::error::chain_message(e.chain()));
             ExitCode::FAILURE
         }
     }

@@ -44,6 +44,8 @@ pub mod error;
 pub mod file;
 #[cfg(any(test, feature = "test-support"))]
 pub mod fixtures;
+#[cfg(any(test, feature = "test-support"))]
+pub mod fuzz;
 pub mod geometry;
 pub mod graph;
 pub mod grid2d;

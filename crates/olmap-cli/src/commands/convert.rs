@@ -114,6 +114,7 @@ pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
         read: ReadOptions {
             format: a.in_format,
             uos_valid_only: a.threedtk_valid,
+            ..Default::default()
         },
         write: WriteOptions {
             format: a.out_format,

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Sighting;
 use crate::error::{Error, ParseError, Result};
+use crate::file::text::json_message;
 use crate::file::OutputSet;
 use crate::geometry::PoseList;
 
@@ -226,7 +227,12 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
     let dir = dir.as_ref();
     let manifest_path = dir.join("manifest.json");
     let manifest: DatasetManifest = read_text(&manifest_path, "dataset manifest", |r| {
-        serde_json::from_reader(r).map_err(|e| ParseError::line(e.line(), format!("{e}")))
+        serde_json::from_reader(r).map_err(|e| {
+            ParseError::line(
+                e.line(),
+                format!("column {}: {}", e.column(), json_message(&e)),
+            )
+        })
     })?;
     let bad = |reason: String| Error::Read {
         path: manifest_path.clone(),

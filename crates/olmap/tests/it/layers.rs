@@ -22,7 +22,7 @@ const LAYERS: &[&[&str]] = &[
     &["team"],
     &["sim"],
     &["fixtures", "test_data"],
-    &["bench"],
+    &["bench", "fuzz"],
 ];
 
 fn rank(module: &str) -> Option<usize> {

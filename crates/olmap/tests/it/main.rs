@@ -3,6 +3,7 @@
 mod align;
 mod align_exact;
 mod align_synthetic;
+mod audit_readers;
 mod bad_input;
 mod beacon;
 mod data_safety;
