@@ -47,6 +47,7 @@ pub mod fixtures;
 pub mod geometry;
 pub mod grid2d;
 pub mod io;
+pub mod limits;
 pub mod mapping;
 pub mod occupancy;
 pub mod progress;
