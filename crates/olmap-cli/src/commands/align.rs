@@ -90,6 +90,12 @@ fn guess(s: &str) -> anyhow::Result<Pose> {
             .map(|p| p.pose)
             .with_context(|| format!("{s}: no pose in the file"));
     }
+    if !s.contains(',') {
+        bail!(
+            "--guess: '{s}' is neither a pose x,y,z,yaw,pitch,roll (metres, degrees) nor a pose \
+             file: there is no file of that name"
+        );
+    }
     parse_pose(s, "--guess")
 }
 
