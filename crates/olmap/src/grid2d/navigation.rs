@@ -119,8 +119,14 @@ pub fn navigation_grid(
         return Ok(TrinaryGrid::unknown(res, [0.0, 0.0, 0.0], 0, 0));
     }
     let m = params.margin_cells as i64;
-    let (lo, hi) = ((lo.0 - m, lo.1 - m), (hi.0 + m, hi.1 + m));
-    let (w, h) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
+    // Saturating: at a resolution of 1e-20 m the cells are near i64's ends, and the size
+    // check refuses the grid.
+    let (lo, hi) = (
+        (lo.0.saturating_sub(m), lo.1.saturating_sub(m)),
+        (hi.0.saturating_add(m), hi.1.saturating_add(m)),
+    );
+    let span = |a: i64, b: i64| b.saturating_sub(a).saturating_add(1) as usize;
+    let (w, h) = (span(lo.0, hi.0), span(lo.1, hi.1));
     if w.checked_mul(h).is_none_or(|n| n > MAX_NAV_CELLS) {
         return Err(Error::TooLarge {
             what: format!("a {w} x {h} navigation grid"),

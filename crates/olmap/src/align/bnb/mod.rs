@@ -168,17 +168,18 @@ pub(super) fn exact_search(
 /// The coarsest level: the first with at most [`ROOT_TRANSLATIONS`] translation blocks and
 /// [`ROOT_NODES`] roots (at most 16), for `n_r` rotations and `n_t` translations.
 fn top_level(n_r: [i32; 3], n_t: [i32; 3], searched_r: [bool; 3]) -> u32 {
+    // Saturating products: a window of 1e20 m has 2^31 translations per axis.
     let roots_at = |level: u32| -> u64 {
         (0..3)
             .map(|i| (n_t[i] as u64).div_ceil(1 << level))
-            .product()
+            .fold(1, u64::saturating_mul)
     };
     let rot_roots_at = |level: u32| -> u64 {
         let r = level.saturating_sub(ROTATION_LAG);
         (0..3)
             .filter(|&i| searched_r[i])
             .map(|i| (n_r[i] as u64).div_ceil(1 << r))
-            .product()
+            .fold(1, u64::saturating_mul)
     };
     let mut top = 0u32;
     while (roots_at(top) > ROOT_TRANSLATIONS
