@@ -58,6 +58,12 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     check_unique_names(&job.scans)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
+    // Every point must have a voxel key at the map's resolution: an error naming the scan
+    // and the point, not one deep in the mapper (or a point lost).
+    let keys = occupancy::OccupancyList::new(job.params.register.search.resolution)?;
+    for s in &scans {
+        keys.check_keys(&s.cloud, &crate::geometry::Pose::identity(), &s.name)?;
+    }
     let mut params = job.params.clone();
     if let Some(name) = &job.first {
         params.first = scan_index(&scans, name)?;
