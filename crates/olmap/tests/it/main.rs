@@ -8,6 +8,7 @@ mod beacon;
 mod fuzz;
 mod grid2d;
 mod layers;
+mod limits;
 mod mapping;
 mod mutual;
 mod occupancy;
