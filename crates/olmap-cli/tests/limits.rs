@@ -158,15 +158,24 @@ const SWEEP: &[(&str, &[&str])] = &[
     ("voxelize {a} -o {out}.olm --max-count={v}", INT),
     ("voxelize {a} -o {out}.olm --bucket-radius={v}", NUM),
     ("voxelize {a} -o {out}.olm --pose={v},0,{v},{v},0,0", NUM),
-    ("voxelize {a} -o {out}.olm --ray-trace --pose={v},0,0,0,0,0", NUM),
+    (
+        "voxelize {a} -o {out}.olm --ray-trace --pose={v},0,0,0,0,0",
+        NUM,
+    ),
     ("voxelize {a} -o {out}.olm --threads={v}", INT),
     ("export {m} -o {out}.ply --min-count={v}", INT),
     ("align {b} {a} --resolution={v}", NUM),
     ("align {b} {a} --levels={v}", INT),
     ("align {b} {a} --dof 6dof --max-tilt={v}", NUM),
     ("align {b} {a} --max-range={v}", NUM),
-    ("align {b} {a} --guess={v},{v},0,{v},0,0 --window 0.5,0.2,15", NUM),
-    ("align {b} {a} --guess 0,0,0,0,0,0 --window={v},{v},{v}", NUM),
+    (
+        "align {b} {a} --guess={v},{v},0,{v},0,0 --window 0.5,0.2,15",
+        NUM,
+    ),
+    (
+        "align {b} {a} --guess 0,0,0,0,0,0 --window={v},{v},{v}",
+        NUM,
+    ),
     ("align {b} {a} --guess 0,0,0,0,0,0 --window={v},0.2,10", NUM),
     (
         "align {b} {a} --search exact --guess={v},0,0,0,0,0 --window 0.5,0.2,15",
@@ -181,8 +190,14 @@ const SWEEP: &[(&str, &[&str])] = &[
     ("align {b} {a} --threads={v}", INT),
     ("localize {b} {m} --max-range={v}", NUM),
     ("localize {b} {m} --levels={v}", INT),
-    ("localize {b} {m} --guess={v},0,0,0,0,0 --window 0.5,0.2,15", NUM),
-    ("localize {b} {m} --guess 0,0,0,0,0,0 --window={v},0.2,10", NUM),
+    (
+        "localize {b} {m} --guess={v},0,0,0,0,0 --window 0.5,0.2,15",
+        NUM,
+    ),
+    (
+        "localize {b} {m} --guess 0,0,0,0,0,0 --window={v},0.2,10",
+        NUM,
+    ),
     ("map {scans} -o {out}.olm --resolution={v}", NUM),
     ("map {scans} -o {out}.olm --max-range={v}", NUM),
     ("map {scans} -o {out}.olm --bucket-radius={v}", NUM),
@@ -194,9 +209,18 @@ const SWEEP: &[(&str, &[&str])] = &[
     ("mutual --a 2 --alpha 10 --b={v} --beta 20", NUM),
     ("mutual --a 2 --alpha 10 --b 2 --beta={v}", NUM),
     ("mutual --a 2 --alpha 10 --b 2 --beta 20 --offset={v}", NUM),
-    ("mutual --a 2 --alpha 10 --b 2 --beta 20 --max-mismatch={v}", NUM),
-    ("mutual --a 2 --alpha 10 --b 2 --beta 20 --range-error={v}", NUM),
-    ("mutual --a 2 --alpha 10 --b 2 --beta 20 --beacon-width={v}", NUM),
+    (
+        "mutual --a 2 --alpha 10 --b 2 --beta 20 --max-mismatch={v}",
+        NUM,
+    ),
+    (
+        "mutual --a 2 --alpha 10 --b 2 --beta 20 --range-error={v}",
+        NUM,
+    ),
+    (
+        "mutual --a 2 --alpha 10 --b 2 --beta 20 --beacon-width={v}",
+        NUM,
+    ),
     ("mutual --scans {s2a} {s2b} --radius={v}", NUM),
     ("mutual --scans {s2a} {s2b} --max-rms={v}", NUM),
     ("mutual --scans {s2a} {s2b} --offset={v}", NUM),
@@ -230,8 +254,14 @@ const SWEEP: &[(&str, &[&str])] = &[
         "grid2d {s2a} {s2b} --poses {truth} -o {out}.pgm --max-range={v}",
         NUM,
     ),
-    ("grid2d {s2a} {s2b} --poses {truth} -o {out}.pgm --hit={v}", NUM),
-    ("grid2d {s2a} {s2b} --poses {truth} -o {out}.pgm --pass={v}", NUM),
+    (
+        "grid2d {s2a} {s2b} --poses {truth} -o {out}.pgm --hit={v}",
+        NUM,
+    ),
+    (
+        "grid2d {s2a} {s2b} --poses {truth} -o {out}.pgm --pass={v}",
+        NUM,
+    ),
     ("beacons {s2a} --radius={v}", NUM),
     ("beacons {s2a} --method rwht --radius={v}", NUM),
     ("beacons {s2a} --method reflective --radius={v}", NUM),
@@ -249,8 +279,14 @@ const SWEEP: &[(&str, &[&str])] = &[
     ("render {m} -o {out}.png --grid={v}", NUM),
     ("render {m} -o {out}.png --band={v},2", NUM),
     ("render {m} -o {out}.png --min-count={v}", INT),
-    ("render {m} -o {out}.png --view depth --from={v},{v},1,{v}", NUM),
-    ("render {m} -o {out}.png --view depth --from 0,0,0,0 --fov={v}", NUM),
+    (
+        "render {m} -o {out}.png --view depth --from={v},{v},1,{v}",
+        NUM,
+    ),
+    (
+        "render {m} -o {out}.png --view depth --from 0,0,0,0 --fov={v}",
+        NUM,
+    ),
     (
         "render {m} -o {out}.png --view depth --from 0,0,0,0 --camera panoramic --fov={v}",
         NUM,
@@ -276,9 +312,18 @@ const SWEEP: &[(&str, &[&str])] = &[
         INT,
     ),
     ("navgrid {m} --poses {poses} -o {out}.pgm --band={v},2", NUM),
-    ("navgrid {m} --poses {poses} -o {out}.pgm --resolution={v}", NUM),
-    ("navgrid {m} --poses {poses} -o {out}.pgm --max-range={v}", NUM),
-    ("navgrid {m} --poses {poses} -o {out}.pgm --min-count={v}", INT),
+    (
+        "navgrid {m} --poses {poses} -o {out}.pgm --resolution={v}",
+        NUM,
+    ),
+    (
+        "navgrid {m} --poses {poses} -o {out}.pgm --max-range={v}",
+        NUM,
+    ),
+    (
+        "navgrid {m} --poses {poses} -o {out}.pgm --min-count={v}",
+        INT,
+    ),
     ("query {m} --at={v},{v},{v}", NUM),
     ("query {m} --ray=1,1,1,{v},{v},{v}", NUM),
     ("query {m} --ray={v},{v},{v},1,0,0", NUM),
@@ -484,12 +529,18 @@ fn audit_refusals_name_the_argument_and_the_limit() {
             "convert {a} {out}.xyz --voxel 1e-9",
             "voxel downsampling: point",
         ),
-        ("convert {a} {out}.xyz --z-min 5 --z-max 1", "z_min (5 m) is above"),
+        (
+            "convert {a} {out}.xyz --z-min 5 --z-max 1",
+            "z_min (5 m) is above",
+        ),
         (
             "convert {a} {out}.xyz --min-range 10 --max-range 1",
             "min_range (10 m) is above",
         ),
-        ("convert {a} {out}.xyz --box 0,5,0,10,1,10", "the box is inverted"),
+        (
+            "convert {a} {out}.xyz --box 0,5,0,10,1,10",
+            "the box is inverted",
+        ),
         (
             "simulate --robots 1 --scans-per-robot 1000000000 -o {out}",
             "limit 4.0 GiB",
@@ -498,8 +549,14 @@ fn audit_refusals_name_the_argument_and_the_limit() {
             "render {m} -o {out}.png --view overlap --scan {b} --from 0,0,0,0 --headings 100000000",
             "3600 headings",
         ),
-        ("voxelize {a} -o {out}.olm --resolution 1e-5", "outside the representable keys"),
-        ("map {scans} {scans} -o {out}.olm", "two scans are named scan000"),
+        (
+            "voxelize {a} -o {out}.olm --resolution 1e-5",
+            "outside the representable keys",
+        ),
+        (
+            "map {scans} {scans} -o {out}.olm",
+            "two scans are named scan000",
+        ),
     ];
     for (i, (template, words)) in cases.iter().enumerate() {
         let out = inputs.root.join(format!("refused{i}"));
@@ -508,15 +565,19 @@ fn audit_refusals_name_the_argument_and_the_limit() {
         let stderr = String::from_utf8_lossy(&r.stderr);
         assert_eq!(r.status.code(), Some(1), "{template}: {stderr}");
         assert!(stderr.contains(words), "{template}: {stderr}");
-        let written = std::fs::read_dir(&inputs.root)
-            .unwrap()
-            .flatten()
-            .any(|e| e.file_name().to_string_lossy().starts_with(&format!("refused{i}")));
+        let written = std::fs::read_dir(&inputs.root).unwrap().flatten().any(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .starts_with(&format!("refused{i}"))
+        });
         assert!(!written, "{template}: an output was written");
     }
     // A segment from 1e15 m away through the room's walls is blocked (the map is the first
     // scan, in its sensor frame: the walls are 6 m either side along x).
-    let args = inputs.args("query {m} --json --segment -1e15,0,0,1e15,0,0", Path::new("-"));
+    let args = inputs.args(
+        "query {m} --json --segment -1e15,0,0,1e15,0,0",
+        Path::new("-"),
+    );
     let r = olmap_bin().args(&args).output().unwrap();
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();

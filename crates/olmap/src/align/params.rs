@@ -253,7 +253,10 @@ impl SearchParams {
             return bad("max_coarse_poses must be at least 1".into());
         }
         if !(self.keep_ratio > 0.0 && self.keep_ratio <= 1.0) {
-            return bad(format!("keep_ratio must be in (0, 1], got {}", self.keep_ratio));
+            return bad(format!(
+                "keep_ratio must be in (0, 1], got {}",
+                self.keep_ratio
+            ));
         }
         if self.max_scan_voxels == 0 {
             return bad("max_scan_voxels must be at least 1".into());

@@ -195,7 +195,10 @@ impl ConvertJob {
         }
         if let Some(b) = &self.crop {
             if !b.min.iter().chain(b.max.iter()).all(|v| v.is_finite()) {
-                return bad(format!("the box must be finite, got {:?} .. {:?}", b.min, b.max));
+                return bad(format!(
+                    "the box must be finite, got {:?} .. {:?}",
+                    b.min, b.max
+                ));
             }
             if let Some(i) = (0..3).find(|&i| b.min[i] > b.max[i]) {
                 let axis = ["x", "y", "z"][i];

@@ -250,10 +250,17 @@ fn audit_query_segment_with_far_ends_sees_the_occupied_voxel() {
             !map.segment_is_free(&p(-far), &p(far), 1).unwrap(),
             "segment ±{far} m"
         );
-        assert!(map.segment_is_free(&p(0.5), &p(far), 1).unwrap(), "0.5 m to {far} m");
         assert!(
-            map.segment_is_free(&Point3::new(-far, 1.0, 0.05), &Point3::new(far, 1.0, 0.05), 1)
-                .unwrap(),
+            map.segment_is_free(&p(0.5), &p(far), 1).unwrap(),
+            "0.5 m to {far} m"
+        );
+        assert!(
+            map.segment_is_free(
+                &Point3::new(-far, 1.0, 0.05),
+                &Point3::new(far, 1.0, 0.05),
+                1
+            )
+            .unwrap(),
             "beside the voxel, ±{far} m"
         );
     }
@@ -265,7 +272,10 @@ fn audit_query_segment_with_far_ends_sees_the_occupied_voxel() {
             .unwrap_or_else(|| panic!("range {range} m"));
         assert_eq!(hit.key, VoxelKey::new(0, 0, 0));
         assert!((hit.distance - 4.9).abs() < 1e-6, "range {range}: {hit:?}");
-        assert!(map.cast_ray(&p(5.0), &Vector3::x(), range, 1).unwrap().is_none());
+        assert!(map
+            .cast_ray(&p(5.0), &Vector3::x(), range, 1)
+            .unwrap()
+            .is_none());
     }
     // A ray from far outside the map's box reaches it too (the walk starts at the box).
     let hit = map
@@ -277,7 +287,10 @@ fn audit_query_segment_with_far_ends_sees_the_occupied_voxel() {
     // An empty map answers at once.
     let empty = OccupancyList::new(0.1).unwrap();
     assert!(empty.segment_is_free(&p(-1e15), &p(1e15), 1).unwrap());
-    assert!(empty.cast_ray(&p(0.0), &Vector3::x(), 1e12, 1).unwrap().is_none());
+    assert!(empty
+        .cast_ray(&p(0.0), &Vector3::x(), 1e12, 1)
+        .unwrap()
+        .is_none());
 }
 
 fn laser_scan(n: usize) -> LaserScan {
@@ -385,6 +398,9 @@ fn xyz(dir: &std::path::Path, name: &str) -> std::path::PathBuf {
     p
 }
 
+/// A change to a conversion job.
+type Edit = dyn Fn(&mut olmap::io::ConvertJob);
+
 #[test]
 fn audit_convert_inverted_filters_are_refused() {
     // Inverted filters (`--z-min 5 --z-max 1`, `--min-range 10 --max-range 1`, an inverted
@@ -392,7 +408,7 @@ fn audit_convert_inverted_filters_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let input = xyz(dir.path(), "in.xyz");
     let output = dir.path().join("out.xyz");
-    let job = |edit: &dyn Fn(&mut olmap::io::ConvertJob)| {
+    let job = |edit: &Edit| {
         let mut j = olmap::io::ConvertJob {
             input: input.clone(),
             output: output.clone(),
@@ -405,7 +421,7 @@ fn audit_convert_inverted_filters_are_refused() {
         min: Point3::new(0.0, 5.0, 0.0),
         max: Point3::new(10.0, 1.0, 10.0),
     };
-    let cases: [(&dyn Fn(&mut olmap::io::ConvertJob), &str); 5] = [
+    let cases: [(&Edit, &str); 5] = [
         (
             &|j| {
                 j.z_min = Some(5.0);
@@ -420,7 +436,10 @@ fn audit_convert_inverted_filters_are_refused() {
             },
             "min_range (10 m) is above max_range (1 m)",
         ),
-        (&|j| j.crop = Some(inverted_box), "y min 5 is above y max 1"),
+        (
+            &move |j| j.crop = Some(inverted_box),
+            "y min 5 is above y max 1",
+        ),
         (&|j| j.z_min = Some(f64::NAN), "z_min"),
         (&|j| j.voxel = Some(0.0), "voxel edge"),
     ];
@@ -457,7 +476,14 @@ fn audit_map_duplicate_scan_names_are_refused() {
         report: None,
     };
     let e = olmap::mapping::run_map_job(&job, &mut |_, _, _| {}).unwrap_err();
-    assert_invalid(&e, &["two scans are named scan000", "a/scan000.xyz", "b/scan000.xyz"]);
+    assert_invalid(
+        &e,
+        &[
+            "two scans are named scan000",
+            "a/scan000.xyz",
+            "b/scan000.xyz",
+        ],
+    );
     assert!(!dir.path().join("m.olm").exists());
 }
 
@@ -467,8 +493,11 @@ fn audit_voxelize_endpoints_honour_hit_and_max_count() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.xyz");
     // Four points in one 0.5 m voxel, one in another.
-    std::fs::write(&input, "0.1 0.1 0.1\n0.2 0.1 0.1\n0.3 0.1 0.1\n0.4 0.1 0.1\n2.1 0.1 0.1\n")
-        .unwrap();
+    std::fs::write(
+        &input,
+        "0.1 0.1 0.1\n0.2 0.1 0.1\n0.3 0.1 0.1\n0.4 0.1 0.1\n2.1 0.1 0.1\n",
+    )
+    .unwrap();
     let run = |hit, max_count| {
         let job = olmap::occupancy::VoxelizeJob {
             clouds: vec![input.clone()],
@@ -487,7 +516,11 @@ fn audit_voxelize_endpoints_honour_hit_and_max_count() {
         olmap::occupancy::run_voxelize(&job, &mut |_, _, _| {})
     };
     let map = run(3, 5).unwrap().map;
-    assert_eq!(map.count(VoxelKey::new(0, 0, 0)), 5, "4 x 3 = 12, capped at 5");
+    assert_eq!(
+        map.count(VoxelKey::new(0, 0, 0)),
+        5,
+        "4 x 3 = 12, capped at 5"
+    );
     assert_eq!(map.count(VoxelKey::new(4, 0, 0)), 3);
     // The defaults count points, as before.
     let map = run(1, olmap::occupancy::MAX_COUNT).unwrap().map;
@@ -531,7 +564,14 @@ fn audit_threads_capped() {
     let t = olmap::limits::thread_count(100_000);
     assert_eq!((t.threads, t.limit), (limit, limit));
     let note = t.note().unwrap();
-    assert!(note.contains("100000") && note.contains(&limit.to_string()), "{note}");
+    assert!(
+        note.contains("100000") && note.contains(&limit.to_string()),
+        "{note}"
+    );
     assert_eq!(olmap::limits::thread_count(limit).note(), None);
-    assert_eq!(olmap::limits::thread_count(0).threads, 0, "0 means one per core");
+    assert_eq!(
+        olmap::limits::thread_count(0).threads,
+        0,
+        "0 means one per core"
+    );
 }
