@@ -126,7 +126,8 @@ pub(super) fn exact_search(
             what: format!(
                 "the exact search gave up after bounding {} nodes ({:.2e} voxel bounds): \
                  too many poses score alike for the bounds to prune (a flat or repetitive \
-                 scene); use the multi-resolution search or a window",
+                 scene); use the multi-resolution search, a window, or a larger \
+                 exact_max_work",
                 bounded.iter().sum::<usize>(),
                 budget.spent.load(std::sync::atomic::Ordering::Relaxed) as f64
             ),
