@@ -187,6 +187,10 @@ const SWEEP: &[(&str, &[&str])] = &[
     ),
     ("align {b} {a} --search exact --resolution={v}", NUM),
     ("align {b} {a} --search exact --max-range={v}", NUM),
+    (
+        "align {b} {a} --search exact --guess 0,0,0,0,0,0 --window 0.5,0.2,10 --exact-max-work={v}",
+        NUM,
+    ),
     ("align {b} {a} --threads={v}", INT),
     ("localize {b} {m} --max-range={v}", NUM),
     ("localize {b} {m} --levels={v}", INT),
@@ -525,6 +529,10 @@ fn audit_refusals_name_the_argument_and_the_limit() {
             "limit 4.0 GiB",
         ),
         ("align {b} {a} --resolution 1e-6", "the target: point"),
+        (
+            "align {b} {a} --search exact --exact-max-work 1000",
+            "the exact search gave up",
+        ),
         (
             "convert {a} {out}.xyz --voxel 1e-9",
             "voxel downsampling: point",
