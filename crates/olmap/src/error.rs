@@ -13,7 +13,7 @@
 //! | [`Error::UnknownFormat`], [`Error::Read`] | a file is not what it claims (path, format, line) | [`crate::io::read_cloud`], [`crate::occupancy::read_map`], [`crate::io::read_poses`] |
 //! | [`Error::Write`] | a write failed; the target is untouched | [`crate::file::write_atomic`] and every writer |
 //! | [`Error::EmptyInput`] | nothing to work on: wait for data or pick another input | registration with an empty target or no source point in range, [`crate::mapping::build_map`] without scans, [`crate::team::map_team`] on an empty store, [`crate::io::scan_files`] finding no scan |
-//! | [`Error::TooLarge`] | over a limit olmap enforces: ask for less | the exact search's bound grids, 2D and navigation grids beyond their cell limits, a `.bz2` file that decompresses beyond its limit, a `.bt` octree that expands beyond its voxel limit |
+//! | [`Error::TooLarge`] | over a limit olmap enforces: ask for less | a memory estimate over [`crate::limits::MAX_ESTIMATE_BYTES`] (a search's uniform start, a simulation, an overlap surface), the exact search's bound grids and work, 2D and navigation grids beyond their cell limits, a `.bz2` file that decompresses beyond its limit, a `.bt` octree that expands beyond its voxel limit, a point whose voxel key is outside the representable range |
 //! | [`Error::Unsupported`] | a valid request olmap does not do | reserved for format variants and mode combinations |
 //! | [`Error::NotFound`] | a name is not where it was looked up | [`crate::mapping::odometry_for`] (a scan without an odometry pose), [`crate::mapping::run_map_job`] (no scan of the first scan's name) |
 //! | [`Error::InvalidArgument`] | a bad parameter value or a contradiction between parameters | parameter checks everywhere |

@@ -50,6 +50,7 @@ pub mod geometry;
 pub mod graph;
 pub mod grid2d;
 pub mod io;
+pub mod limits;
 pub mod mapping;
 pub mod occupancy;
 pub mod progress;

@@ -20,7 +20,7 @@ pub fn exhaustive_search(
     let start = Instant::now();
     let problem = prepare(source, target, params)?;
     let t = Instant::now();
-    let cands = initial_candidates(&problem, params, &target.pyramid, 0);
+    let cands = initial_candidates(&problem, params, &target.pyramid, 0)?;
     let (scored, best_hits, evaluated) = score_level(&problem, &cands, 0, params.keep_ratio);
     let passed = scored.len();
     let reports = vec![level_report(

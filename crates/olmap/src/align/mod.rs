@@ -15,10 +15,10 @@ mod search;
 mod significance;
 mod target;
 
-pub use bnb::EXACT_MAX_AMBIGUITY;
+pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
-pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
+pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     TrustThresholds, REFINE_REACH_CELLS,
@@ -43,6 +43,7 @@ pub fn align_clouds(
     target: &PointCloud,
     params: &SearchParams,
 ) -> Result<Alignment> {
+    params.validate()?;
     let levels = levels_for_clouds(source, target, params);
     let target = SearchTarget::from_cloud(target, params.resolution, levels)?;
     global_search(source, &target, params)

@@ -200,6 +200,7 @@ pub fn register(
     target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    params.search.validate()?;
     let levels = levels_for_clouds(source, target, &params.search);
     let t = SearchTarget::from_cloud(target, params.search.resolution, levels)?;
     register_to(source, &t, target, params)
@@ -268,6 +269,7 @@ pub fn localize(
     // so that their check is of the value in use.
     let mut search_params = params.search.clone();
     search_params.resolution = map.resolution();
+    search_params.validate()?;
     let extent = map
         .stats()
         .bbox

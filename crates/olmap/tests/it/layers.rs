@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 /// The layers, bottom first; modules in one layer may not import each other.
 const LAYERS: &[&[&str]] = &[
     &["error", "progress"],
-    &["file"],
+    &["file", "limits"],
     &["geometry"],
     &["cloud"],
     &["io"],

@@ -11,6 +11,7 @@ mod fuzz;
 mod graph;
 mod grid2d;
 mod layers;
+mod limits;
 mod mapping;
 mod mutual;
 mod occupancy;
