@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use super::input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 use super::{build_map, MapBuild, MapParams, MapReport};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::file::{html_path_beside, write_atomic, OutputSet};
 use crate::geometry::PoseList;
 use crate::io::ReadOptions;
