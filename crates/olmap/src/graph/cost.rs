@@ -23,7 +23,7 @@ use nalgebra::{SVector, Vector2};
 use serde::{Deserialize, Serialize};
 
 use super::lie::{Group, S2, S3};
-use super::model::{Measurement, NodePose, PoseGraph};
+use super::model::{Measurement, PoseGraph};
 use crate::geometry::wrap_angle;
 
 /// A residual convention for [`cost`].
@@ -47,30 +47,6 @@ impl CostConvention {
     }
 }
 
-fn s3(p: &NodePose) -> S3 {
-    let p = p.to_pose();
-    S3 {
-        p: p.translation(),
-        q: p.rotation(),
-    }
-}
-
-fn s2(p: &NodePose) -> S2 {
-    match p {
-        NodePose::Se2(p) => S2 {
-            p: Vector2::new(p.x, p.y),
-            th: p.theta,
-        },
-        NodePose::Se3(p) => {
-            let t = p.translation();
-            S2 {
-                p: Vector2::new(t.x, t.y),
-                th: p.yaw_pitch_roll().0,
-            }
-        }
-    }
-}
-
 /// The cost `1/2 sum r^T Omega r` of a graph at its current poses in a convention (no
 /// robust kernels), summed in edge order.
 pub fn cost(graph: &PoseGraph, convention: CostConvention) -> f64 {
@@ -81,7 +57,7 @@ pub fn cost(graph: &PoseGraph, convention: CostConvention) -> f64 {
         };
         let chi2 = match &e.measurement {
             Measurement::Se3 { t_i_j, information } => {
-                let (xi, xj) = (s3(&a.pose), s3(&b.pose));
+                let (xi, xj) = (S3::from(&a.pose), S3::from(&b.pose));
                 let m = S3 {
                     p: t_i_j.translation(),
                     q: t_i_j.rotation(),
@@ -98,7 +74,7 @@ pub fn cost(graph: &PoseGraph, convention: CostConvention) -> f64 {
                 (r.transpose() * information * r)[0]
             }
             Measurement::Se2 { t_i_j, information } => {
-                let (xi, xj) = (s2(&a.pose), s2(&b.pose));
+                let (xi, xj) = (S2::from(&a.pose), S2::from(&b.pose));
                 let m = S2 {
                     p: Vector2::new(t_i_j.x, t_i_j.y),
                     th: t_i_j.theta,

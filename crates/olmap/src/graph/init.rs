@@ -9,7 +9,7 @@
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector2};
 
-use super::lie::{S2, S3};
+use super::lie::{free_variables, S2, S3};
 use super::sparse::{BlockMatrix, Factor, Symbolic};
 
 /// A state that the chordal initialisation can read and rebuild (rotations of dimension R).
@@ -85,15 +85,7 @@ pub(crate) fn chordal<const R: usize, G: Chordal<R>>(
     held: &[bool],
     edges: &[InitEdge<R>],
 ) -> bool {
-    let n = states.len();
-    let mut var = vec![usize::MAX; n];
-    let mut free = Vec::new();
-    for v in 0..n {
-        if !held[v] {
-            var[v] = free.len();
-            free.push(v);
-        }
-    }
+    let (var, free) = free_variables(held);
     if free.is_empty() {
         return true;
     }

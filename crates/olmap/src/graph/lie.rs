@@ -17,6 +17,7 @@
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 
+use super::model::NodePose;
 use crate::geometry::wrap_angle;
 
 /// A solver state: the pose of one node (also the type of a measurement).
@@ -45,6 +46,51 @@ pub(crate) struct S3 {
 pub(crate) struct S2 {
     pub p: Vector2<f64>,
     pub th: f64,
+}
+
+impl From<&NodePose> for S3 {
+    /// The node's pose (an SE(2) node as a planar SE(3) pose).
+    fn from(p: &NodePose) -> S3 {
+        let p = p.to_pose();
+        S3 {
+            p: p.translation(),
+            q: p.rotation(),
+        }
+    }
+}
+
+impl From<&NodePose> for S2 {
+    /// The node's pose (an SE(3) node by its x, y and yaw).
+    fn from(p: &NodePose) -> S2 {
+        match p {
+            NodePose::Se2(p) => S2 {
+                p: Vector2::new(p.x, p.y),
+                th: p.theta,
+            },
+            NodePose::Se3(p) => {
+                let t = p.translation();
+                S2 {
+                    p: Vector2::new(t.x, t.y),
+                    th: p.yaw_pitch_roll().0,
+                }
+            }
+        }
+    }
+}
+
+/// Numbers the nodes not `held` (the solver's variables) in order: `(var, free)` with
+/// `var[v]` the variable of node `v` (`usize::MAX` when held) and `free[k]` the node of
+/// variable `k`.
+pub(crate) fn free_variables(held: &[bool]) -> (Vec<usize>, Vec<usize>) {
+    let mut var = vec![usize::MAX; held.len()];
+    let mut free = Vec::new();
+    for (v, &h) in held.iter().enumerate() {
+        if !h {
+            var[v] = free.len();
+            free.push(v);
+        }
+    }
+    (var, free)
 }
 
 pub(crate) fn skew(v: &Vector3<f64>) -> Matrix3<f64> {

@@ -511,14 +511,19 @@ impl PoseGraph {
         })
     }
 
-    fn checked_pose(&self, pose: NodePose, what: &str) -> Result<NodePose> {
-        if pose.space() != self.space {
+    /// Refuses `what` of another space than the graph's.
+    fn check_space(&self, space: Space, what: &str) -> Result<()> {
+        if space != self.space {
             return Err(Error::InvalidArgument(format!(
-                "pose graph: {what} is {:?} but the graph is {:?}",
-                pose.space(),
+                "pose graph: {what} is {space:?} but the graph is {:?}",
                 self.space
             )));
         }
+        Ok(())
+    }
+
+    fn checked_pose(&self, pose: NodePose, what: &str) -> Result<NodePose> {
+        self.check_space(pose.space(), what)?;
         match pose {
             NodePose::Se2(p) => {
                 if !p.is_finite() {
@@ -536,13 +541,7 @@ impl PoseGraph {
     }
 
     fn checked_measurement(&self, m: Measurement, what: &str) -> Result<Measurement> {
-        if m.space() != self.space {
-            return Err(Error::InvalidArgument(format!(
-                "pose graph: {what} is {:?} but the graph is {:?}",
-                m.space(),
-                self.space
-            )));
-        }
+        self.check_space(m.space(), what)?;
         match m {
             Measurement::Se2 { t_i_j, information } => {
                 if !t_i_j.is_finite() {

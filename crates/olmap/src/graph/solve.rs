@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::init::{chordal, Chordal, InitEdge};
-use super::lie::{Group, S2, S3};
+use super::lie::{free_variables, Group, S2, S3};
 use super::model::{
     EdgeKind, Kernel, Measurement, NodeId, NodePose, PoseGraph, Se2, Space, OUTLIER_WEIGHT,
 };
@@ -145,11 +145,7 @@ trait GraphState<const D: usize, const R: usize>: Group<D> + Chordal<R> {
 
 impl GraphState<6, 3> for S3 {
     fn from_node(p: &NodePose) -> S3 {
-        let p = p.to_pose();
-        S3 {
-            p: p.translation(),
-            q: p.rotation(),
-        }
+        S3::from(p)
     }
     fn to_node(&self) -> NodePose {
         NodePose::Se3(Pose::from_parts(self.p, self.q))
@@ -183,19 +179,7 @@ impl GraphState<6, 3> for S3 {
 
 impl GraphState<3, 2> for S2 {
     fn from_node(p: &NodePose) -> S2 {
-        match p {
-            NodePose::Se2(p) => S2 {
-                p: Vector2::new(p.x, p.y),
-                th: p.theta,
-            },
-            NodePose::Se3(p) => {
-                let t = p.translation();
-                S2 {
-                    p: Vector2::new(t.x, t.y),
-                    th: p.yaw_pitch_roll().0,
-                }
-            }
-        }
+        S2::from(p)
     }
     fn to_node(&self) -> NodePose {
         NodePose::Se2(Se2::new(self.p.x, self.p.y, self.th))
@@ -515,15 +499,7 @@ fn levenberg_marquardt<const D: usize, G: Group<D>>(
     edges: &[SEdge<D, G>],
     params: &SolveParams,
 ) -> Outcome {
-    let n = states.len();
-    let mut var = vec![usize::MAX; n];
-    let mut free = Vec::new();
-    for v in 0..n {
-        if !held[v] {
-            var[v] = free.len();
-            free.push(v);
-        }
-    }
+    let (var, free) = free_variables(held);
     let mut cost = total_cost(edges, states);
     let done = |cost, iterations, converged, termination, blocks| Outcome {
         cost,
