@@ -2,6 +2,7 @@
 //! refinement.
 
 mod bnb;
+mod consistency;
 mod evaluate;
 mod exhaustive;
 pub mod icp;
@@ -14,15 +15,18 @@ mod score;
 mod search;
 mod significance;
 mod target;
+pub mod verdict;
 
 pub use bnb::EXACT_MAX_AMBIGUITY;
+pub use consistency::{consistency, Consistency, SideAgreement};
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
-    TrustThresholds, REFINE_REACH_CELLS,
+    REFINE_REACH_CELLS,
 };
+pub use verdict::TrustThresholds;
 pub use report::{
     matrix_rows, AlignmentReport, DegeneracyJson, LevelJson, Matrix4Rows, RefinementReport,
     SearchReport,

@@ -2,51 +2,17 @@
 
 use std::time::Instant;
 
+use super::consistency::{consistency, Consistency};
 use super::icp::{refine, IcpParams, IcpResult};
 use super::lattice::Alignment;
 use super::search::global_search;
 use super::target::SearchTarget;
+use super::verdict::{agreement_doubts, refinement_doubts, search_doubts, TrustThresholds};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::{Aabb, Pose};
 use crate::occupancy::OccupancyList;
-
-/// When a registration is trusted. A result is trusted only if every test passes; the
-/// failed ones are listed in [`Registration::doubts`].
-///
-/// The defaults come from the shared real data (README of the data folder): correct
-/// global matches of the 3DTK and car pairs overlap 22-37 % of the scan's voxels at the
-/// finest level, unrelated scenes (car against 3DTK, OctoMap's scan.dat against 3DTK)
-/// 2-4 %. Significance alone is not enough: a scan placed anywhere in a huge sparse map
-/// (the outdoor car scene) scores z > 100 by chance because the search keeps the best of
-/// hundreds of thousands of poses.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrustThresholds {
-    /// Smallest overlap fraction at the finest search level (default 0.10).
-    pub min_overlap_fraction: f64,
-    /// Smallest significance z-score (default 10).
-    pub min_significance: f64,
-    /// Largest ambiguity (distinct solutions; default 1).
-    pub max_ambiguity: usize,
-    /// Smallest ICP inlier fraction (default 0.3).
-    pub min_inlier_fraction: f64,
-    /// Largest move of the refinement away from the search's pose, in finest cells
-    /// (default 3): a larger move means the search's cell was not the refined optimum's.
-    pub max_refine_shift_cells: f64,
-}
-
-impl Default for TrustThresholds {
-    fn default() -> Self {
-        TrustThresholds {
-            min_overlap_fraction: 0.10,
-            min_significance: 10.0,
-            max_ambiguity: 1,
-            min_inlier_fraction: 0.3,
-            max_refine_shift_cells: 3.0,
-        }
-    }
-}
 
 /// Parameters of [`register`] and [`localize`]. The default refines with ICP.
 #[derive(Debug, Clone)]
@@ -78,58 +44,15 @@ pub struct Registration {
     pub search: Alignment,
     /// The refinement's result.
     pub refinement: Option<IcpResult>,
-    /// Whether every trust test passed.
+    /// How the two scans agree where both looked, at the refined pose (computed when the
+    /// refinement ran; see [`super::consistency`]).
+    pub consistency: Option<Consistency>,
+    /// Whether every trust test passed (the rule: [`super::verdict`]).
     pub trusted: bool,
     /// The trust tests that failed, in words.
     pub doubts: Vec<String>,
     /// Wall time of the whole registration, seconds.
     pub seconds: f64,
-}
-
-fn verdict(
-    search: &Alignment,
-    refinement: Option<&IcpResult>,
-    resolution: f64,
-    t: &TrustThresholds,
-) -> Vec<String> {
-    let mut doubts = Vec::new();
-    if search.overlap_fraction < t.min_overlap_fraction {
-        doubts.push(format!(
-            "overlap fraction {:.3} < {:.3}",
-            search.overlap_fraction, t.min_overlap_fraction
-        ));
-    }
-    if search.significance < t.min_significance {
-        doubts.push(format!(
-            "significance {:.1} < {:.1}",
-            search.significance, t.min_significance
-        ));
-    }
-    if search.ambiguity > t.max_ambiguity {
-        doubts.push(format!(
-            "{} distinct solutions score within the keep ratio of the best",
-            search.ambiguity
-        ));
-    }
-    if let Some(r) = refinement {
-        if !r.converged {
-            doubts.push("the refinement did not converge".into());
-        }
-        if r.inlier_fraction < t.min_inlier_fraction {
-            doubts.push(format!(
-                "refinement inlier fraction {:.3} < {:.3}",
-                r.inlier_fraction, t.min_inlier_fraction
-            ));
-        }
-        let shift = (r.pose.translation() - search.pose.translation()).norm();
-        if shift > t.max_refine_shift_cells * resolution {
-            doubts.push(format!(
-                "the refinement moved {shift:.3} m from the search's pose (> {:.0} cells)",
-                t.max_refine_shift_cells
-            ));
-        }
-    }
-    doubts
 }
 
 /// How far, in finest search cells, the refinement after a search looks for
@@ -151,41 +74,63 @@ fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
     p
 }
 
-fn finish(
+/// What the refinement and the agreement check work against: the prepared target (its
+/// finest level and free space) and its points, cropped to the reach of the search's pose.
+struct Against<'a, F: FnOnce() -> PointCloud> {
+    target: &'a SearchTarget,
+    points: F,
+}
+
+fn finish<F: FnOnce() -> PointCloud>(
     source: &PointCloud,
-    refine_target: impl FnOnce() -> PointCloud,
+    against: Against<'_, F>,
     search: Alignment,
-    resolution: f64,
     params: &RegisterParams,
     start: Instant,
 ) -> Result<Registration> {
+    let resolution = against.target.resolution();
     // A search that already fails its own tests is not refined: ICP cannot make an
     // ambiguous or barely overlapping match trustworthy, and skipping it saves the most
     // expensive part of every hopeless attempt (map building tries many).
-    let search_doubts = verdict(&search, None, resolution, &params.trust);
-    let refinement = match (
-        &params.refine,
-        search.overlap > 0 && search_doubts.is_empty(),
-    ) {
-        (Some(p), true) => Some(refine(
-            source,
-            &refine_target(),
-            &search.pose,
-            &refinement_after_search(p, resolution),
-        )?),
-        _ => None,
+    let mut doubts = search_doubts(&search, &params.trust);
+    let (refinement, consistency) = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
+        (Some(p), true) => {
+            let points = (against.points)();
+            let r = refine(
+                source,
+                &points,
+                &search.pose,
+                &refinement_after_search(p, resolution),
+            )?;
+            let at = if r.converged { r.pose } else { search.pose };
+            let c = consistency(source, against.target, Some(&points), &at)?;
+            (Some(r), Some(c))
+        }
+        _ => (None, None),
     };
     let pose = match &refinement {
         Some(r) if r.converged => r.pose,
         _ => search.pose,
     };
-    let doubts = verdict(&search, refinement.as_ref(), resolution, &params.trust);
+    if let Some(r) = &refinement {
+        doubts.extend(refinement_doubts(
+            &search,
+            r,
+            resolution,
+            params.search.dof,
+            &params.trust,
+        ));
+    }
+    if let Some(c) = &consistency {
+        doubts.extend(agreement_doubts(c, &params.trust));
+    }
     Ok(Registration {
         pose,
         trusted: doubts.is_empty(),
         doubts,
         search,
         refinement,
+        consistency,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -244,12 +189,14 @@ pub fn register_to_split(
     let reachable = crop(&search.pose);
     finish(
         source,
-        || match reachable {
-            Some(b) => refine_target.crop_box(&b),
-            None => refine_target.clone(),
+        Against {
+            target,
+            points: || match reachable {
+                Some(b) => refine_target.crop_box(&b),
+                None => refine_target.clone(),
+            },
         },
         search,
-        res,
         params,
         start,
     )
@@ -277,9 +224,11 @@ pub fn localize(
     let search = global_search(source, &target, &search_params)?;
     finish(
         source,
-        || map.to_cloud(),
+        Against {
+            target: &target,
+            points: || map.to_cloud(),
+        },
         search,
-        map.resolution(),
         params,
         start,
     )

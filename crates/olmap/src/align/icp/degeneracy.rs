@@ -34,6 +34,9 @@ pub struct Degeneracy {
     /// weakest first, each named by its dominant component and that component's magnitude,
     /// e.g. `"translation along x (0.98)"`.
     pub weak: Vec<String>,
+    /// The fraction of the largest eigenvalue below which a direction is weak (the
+    /// [`super::IcpParams::weak_fraction`] in force).
+    pub weak_fraction: f64,
 }
 
 impl Degeneracy {
@@ -48,7 +51,35 @@ impl Degeneracy {
             eigenvectors,
             condition: f64::INFINITY,
             weak: AXIS_NAMES.iter().map(|n| format!("{n} (1.00)")).collect(),
+            weak_fraction: 1.0,
         }
+    }
+
+    /// The names of the coordinate axes (`"translation along x"`, ...) that weak directions
+    /// leave free, among those `searched` (`(ωx, ωy, ωz, vx, vy, vz)`): a weak direction
+    /// counts when most of it (squared components summing to at least one half) lies on
+    /// searched axes, and is named by its largest searched component. Each name once.
+    pub fn free_searched_axes(&self, searched: [bool; 6]) -> Vec<&'static str> {
+        let max = self.eigenvalues[5];
+        let mut out: Vec<&'static str> = Vec::new();
+        for k in 0..6 {
+            if !(self.eigenvalues[k] < self.weak_fraction * max || max <= 0.0) {
+                continue;
+            }
+            let v = &self.eigenvectors[k];
+            let on_searched: f64 = (0..6).filter(|&j| searched[j]).map(|j| v[j] * v[j]).sum();
+            if on_searched < 0.5 {
+                continue;
+            }
+            let j = (0..6)
+                .filter(|&j| searched[j])
+                .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+                .unwrap_or(0);
+            if !out.contains(&AXIS_NAMES[j]) {
+                out.push(AXIS_NAMES[j]);
+            }
+        }
+        out
     }
 
     /// Eigen-decomposition of a normalised information matrix.
@@ -87,6 +118,7 @@ impl Degeneracy {
             eigenvectors,
             condition,
             weak,
+            weak_fraction,
         }
     }
 }

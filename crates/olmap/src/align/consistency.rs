@@ -1,0 +1,187 @@
+//! Whether two scans agree where both looked: a check of a registration that counts what
+//! the overlap does not, the places where one scan saw a surface and the other saw through.
+//!
+//! Overlap counts coinciding voxels, and in man-made places much coincides anywhere: a
+//! floor, a ceiling, a wall at a common height. A wrong pose still puts some of the scan
+//! where the target's rays passed freely, and (seen from the other side) some of the
+//! target where the scan's rays passed. [`consistency`] measures both at the finest
+//! resolution after refinement:
+//!
+//! * only **surface** voxels count: those with at least [`MIN_SURFACE_NEIGHBOURS`] occupied
+//!   voxels of their own scan among their 26 neighbours (a stray return, a speck of dust or
+//!   a random outlier has none, and says nothing about a surface);
+//! * a source voxel is **supported** when a target voxel is occupied in its 3 x 3 x 3
+//!   neighbourhood (one cell of tolerance absorbs the range noise and the grid's phase);
+//! * it is **contradicted** when it is not supported and lies in the target's free space
+//!   (cells its rays crossed, minus [`super::FREE_SPACE_MARGIN`] before each return);
+//! * otherwise the target never observed it, and it does not count.
+//!
+//! The agreement of one side is `supported / (supported + contradicted)`; the same is
+//! computed for the target's voxels against the source's free space, and
+//! [`Consistency::agreement`] is the smaller of the two. A right pose scores close to 1
+//! (what is left is moving things, glass and rays grazing a surface); a wrong pose leaves
+//! surfaces hanging in the other scan's open space.
+
+use super::target::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::Result;
+use crate::geometry::{Pose, VoxelKey};
+use crate::occupancy::OccupancyList;
+
+/// Occupied neighbours (of 26, in its own scan) a voxel needs to count as surface.
+pub const MIN_SURFACE_NEIGHBOURS: usize = 4;
+
+/// The 26 neighbour offsets and the voxel itself.
+fn neighbourhood(k: VoxelKey) -> impl Iterator<Item = VoxelKey> {
+    (-1..=1).flat_map(move |dx| {
+        (-1..=1).flat_map(move |dy| {
+            (-1..=1).filter_map(move |dz| {
+                Some(VoxelKey::new(
+                    k.x.checked_add(dx)?,
+                    k.y.checked_add(dy)?,
+                    k.z.checked_add(dz)?,
+                ))
+            })
+        })
+    })
+}
+
+/// The voxels of `list` with at least [`MIN_SURFACE_NEIGHBOURS`] occupied neighbours.
+fn surface(list: &OccupancyList) -> OccupancyList {
+    list.filtered(|k, _| {
+        neighbourhood(k)
+            .filter(|n| *n != k && list.count(*n) > 0)
+            .nth(MIN_SURFACE_NEIGHBOURS - 1)
+            .is_some()
+    })
+}
+
+/// One side's count: the voxels of one scan against the other's occupancy and free space.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SideAgreement {
+    /// Surface voxels of this scan.
+    pub voxels: u64,
+    /// Voxels with an occupied voxel of the other scan within one cell.
+    pub supported: u64,
+    /// Voxels the other scan saw through (free, and not supported).
+    pub contradicted: u64,
+}
+
+impl SideAgreement {
+    /// `supported / (supported + contradicted)`, 1 when the other scan observed none of
+    /// these voxels.
+    pub fn agreement(&self) -> f64 {
+        let seen = self.supported + self.contradicted;
+        if seen == 0 {
+            1.0
+        } else {
+            self.supported as f64 / seen as f64
+        }
+    }
+
+    /// The share of this scan's voxels the other scan observed (supported or contradicted).
+    pub fn observed_fraction(&self) -> f64 {
+        if self.voxels == 0 {
+            0.0
+        } else {
+            (self.supported + self.contradicted) as f64 / self.voxels as f64
+        }
+    }
+}
+
+/// How two registered scans agree where both looked (module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Consistency {
+    /// The source's voxels (moved by the pose) against the target.
+    pub source: SideAgreement,
+    /// The target's voxels against the source's free space; `None` when the target has no
+    /// points to check (a map without them) or the source no sensor origin to trace from.
+    pub target: Option<SideAgreement>,
+    /// Voxel edge of the check, metres.
+    pub resolution: f64,
+}
+
+impl Consistency {
+    /// The smaller agreement of the two sides (the source's alone when the target side is
+    /// unknown).
+    pub fn agreement(&self) -> f64 {
+        let s = self.source.agreement();
+        self.target.map_or(s, |t| s.min(t.agreement()))
+    }
+}
+
+/// Counts one scan's surface voxels (`mine`, already in the other's frame) against the other's
+/// occupancy and free space (`other`, at the same resolution).
+fn count_side(mine: &OccupancyList, other: &SearchTarget) -> SideAgreement {
+    let occ = other.pyramid().base();
+    let free = other.free.first().and_then(Option::as_ref);
+    let mut side = SideAgreement {
+        voxels: mine.len() as u64,
+        ..Default::default()
+    };
+    for (k, _) in mine.iter() {
+        let near = neighbourhood(k).any(|n| occ.count(n) > 0);
+        if near {
+            side.supported += 1;
+        } else if free.is_some_and(|f| f.contains(k.x as i64, k.y as i64, k.z as i64)) {
+            side.contradicted += 1;
+        }
+    }
+    side
+}
+
+/// The agreement of `source`, placed by `pose` (`T_target_source`), with a prepared
+/// `target` (its finest level and free space), and of `target_points` (in the target frame;
+/// `None` to skip that side) with the source's free space, at the target's finest
+/// resolution.
+///
+/// ```
+/// use nalgebra::Point3;
+/// use olmap::align::{consistency, SearchTarget};
+/// use olmap::cloud::PointCloud;
+/// use olmap::geometry::Pose;
+/// // A scan of a corner (floor and two walls) from above the floor, sensor at (1.5, 1.5, 1).
+/// let mut points = Vec::new();
+/// for i in 0..60 {
+///     for j in 0..60 {
+///         let (a, b) = (i as f32 * 0.05, j as f32 * 0.05);
+///         points.extend([Point3::new(a, b, 0.0), Point3::new(a, 0.0, b), Point3::new(0.0, a, b)]);
+///     }
+/// }
+/// let mut scan = PointCloud::from_points(points);
+/// scan.set_origin(Point3::new(1.5, 1.5, 1.0));
+/// let target = SearchTarget::from_cloud(&scan, 0.1, 1).unwrap();
+/// let right = consistency(&scan, &target, Some(&scan), &Pose::identity()).unwrap();
+/// assert!(right.agreement() > 0.99);
+/// // Lifted by 0.8 m, the floor hangs in the air the target saw through.
+/// let wrong = Pose::from_xyz_ypr(0.0, 0.0, 0.8, 0.0, 0.0, 0.0);
+/// assert!(consistency(&scan, &target, Some(&scan), &wrong).unwrap().agreement() < 0.8);
+/// ```
+///
+/// # Errors
+/// Only for an invalid resolution (never for a target built by this crate).
+pub fn consistency(
+    source: &PointCloud,
+    target: &SearchTarget,
+    target_points: Option<&PointCloud>,
+    pose: &Pose,
+) -> Result<Consistency> {
+    let res = target.resolution();
+    let mut moved = OccupancyList::new(res)?;
+    moved.add_points(source, pose, 1);
+    let source_side = count_side(&surface(&moved), target);
+    let target_side = match target_points {
+        Some(t) if !t.is_empty() && !source.is_empty() => {
+            let seen_from_source = SearchTarget::from_cloud(source, res, 1)?;
+            let mut back = OccupancyList::new(res)?;
+            back.add_points(t, &pose.inverse(), 1);
+            Some(count_side(&surface(&back), &seen_from_source))
+        }
+        _ => None,
+    };
+    Ok(Consistency {
+        source: source_side,
+        target: target_side,
+        resolution: res,
+    })
+}
