@@ -12,8 +12,10 @@
 //!   a random outlier has none, and says nothing about a surface);
 //! * a source voxel is **supported** when a target voxel is occupied in its 3 x 3 x 3
 //!   neighbourhood (one cell of tolerance absorbs the range noise and the grid's phase);
-//! * it is **contradicted** when it is not supported and lies in the target's free space
-//!   (cells its rays crossed, minus [`super::FREE_SPACE_MARGIN`] before each return);
+//! * it is **contradicted** when it is not supported and lies deep in the target's free
+//!   space: its cell and the six next to it were crossed by the target's rays (minus
+//!   [`super::FREE_SPACE_MARGIN`] before each return), so that rays grazing a floor do not
+//!   count against the floor;
 //! * otherwise the target never observed it, and it does not count.
 //!
 //! The agreement of one side is `supported / (supported + contradicted)`; the same is
@@ -25,6 +27,8 @@
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::Result;
+use nalgebra::Point3;
+
 use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::OccupancyList;
 
@@ -112,23 +116,47 @@ impl Consistency {
 
 /// Counts one scan's surface voxels (`mine`, already in the other's frame) against the other's
 /// occupancy and free space (`other`, at the same resolution).
-fn count_side(mine: &OccupancyList, other: &SearchTarget) -> SideAgreement {
-    let occ = other.pyramid().base();
-    let free = other.free.first().and_then(Option::as_ref);
+fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) -> SideAgreement {
+    let res = other.resolution();
+    let levels = other.pyramid().levels();
+    let tol = ANGULAR_TOLERANCE.tan();
     let mut side = SideAgreement {
         voxels: mine.len() as u64,
         ..Default::default()
     };
     for (k, _) in mine.iter() {
-        let near = neighbourhood(k).any(|n| occ.count(n) > 0);
+        // The level whose cell covers the angular tolerance at this range.
+        let d = (mine.center(k) - origin).norm();
+        let level = ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1);
+        let f = 1i32 << level;
+        let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
+        let occ = other.pyramid().level(level);
+        let near = neighbourhood(kl).any(|n| occ.count(n) > 0);
         if near {
             side.supported += 1;
-        } else if free.is_some_and(|f| f.contains(k.x as i64, k.y as i64, k.z as i64)) {
+        } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
             side.contradicted += 1;
         }
     }
     side
 }
+
+/// Whether a cell and its six face neighbours are all free: the free space eroded by one
+/// cell. A ray grazing a floor marks the cells just above the floor free though the floor
+/// is there (its returns too sparse to show every cell): a surface voxel in such a cell has
+/// an unknown or occupied neighbour below and is not counted as seen through.
+fn deep_free(g: &super::score::DenseGrid, k: VoxelKey) -> bool {
+    let (x, y, z) = (k.x as i64, k.y as i64, k.z as i64);
+    [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+        .iter()
+        .all(|(dx, dy, dz)| g.contains(x + dx, y + dy, z + dz))
+}
+
+/// How far a pose may be off in angle and still count as agreeing: a voxel at distance `d`
+/// from its sensor is checked at the coarsest level whose cell is at most `d tan(this)`
+/// (radians; 1°, the refinement's accuracy on the real pairs): a degree of pitch moves a
+/// wall 20 m away by 0.35 m.
+pub const ANGULAR_TOLERANCE: f64 = std::f64::consts::PI / 180.0;
 
 /// The agreement of `source`, placed by `pose` (`T_target_source`), with a prepared
 /// `target` (its finest level and free space), and of `target_points` (in the target frame;
@@ -166,16 +194,38 @@ pub fn consistency(
     target_points: Option<&PointCloud>,
     pose: &Pose,
 ) -> Result<Consistency> {
+    let seen = match target_points {
+        Some(t) if !t.is_empty() && !source.is_empty() => Some(source_view(source, target)?),
+        _ => None,
+    };
+    consistency_seen(source, seen.as_ref(), target, target_points, pose)
+}
+
+/// What the source saw, for the target side of [`consistency_seen`]: its surfaces and free
+/// space at `target`'s finest resolution, in its own frame (the same for every pose, so a
+/// caller checking several poses builds it once).
+pub fn source_view(source: &PointCloud, target: &SearchTarget) -> Result<SearchTarget> {
+    SearchTarget::from_cloud(source, target.resolution(), target.pyramid().levels())
+}
+
+/// [`consistency`] with the source's view prepared ([`source_view`]; `None` skips the
+/// target side).
+pub fn consistency_seen(
+    source: &PointCloud,
+    seen_from_source: Option<&SearchTarget>,
+    target: &SearchTarget,
+    target_points: Option<&PointCloud>,
+    pose: &Pose,
+) -> Result<Consistency> {
     let res = target.resolution();
     let mut moved = OccupancyList::new(res)?;
     moved.add_points(source, pose, 1);
-    let source_side = count_side(&surface(&moved), target);
-    let target_side = match target_points {
-        Some(t) if !t.is_empty() && !source.is_empty() => {
-            let seen_from_source = SearchTarget::from_cloud(source, res, 1)?;
+    let source_side = count_side(&surface(&moved), &pose.transform_point(&source.origin()), target);
+    let target_side = match (target_points, seen_from_source) {
+        (Some(t), Some(seen)) if !t.is_empty() => {
             let mut back = OccupancyList::new(res)?;
             back.add_points(t, &pose.inverse(), 1);
-            Some(count_side(&surface(&back), &seen_from_source))
+            Some(count_side(&surface(&back), &source.origin(), seen))
         }
         _ => None,
     };

@@ -16,9 +16,13 @@ mod search;
 mod significance;
 mod target;
 pub mod verdict;
+pub mod verify;
 
 pub use bnb::EXACT_MAX_AMBIGUITY;
-pub use consistency::{consistency, Consistency, SideAgreement};
+pub use consistency::{
+    consistency, consistency_seen, source_view, Consistency, SideAgreement,
+    MIN_SURFACE_NEIGHBOURS,
+};
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
@@ -26,11 +30,11 @@ pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     REFINE_REACH_CELLS,
 };
-pub use verdict::TrustThresholds;
 pub use report::{
-    matrix_rows, AlignmentReport, DegeneracyJson, LevelJson, Matrix4Rows, RefinementReport,
-    SearchReport,
+    matrix_rows, AgreementJson, AlignmentReport, DegeneracyJson, HypothesisJson, LevelJson,
+    Matrix4Rows, RefinementReport, SearchReport, UniquenessReport,
 };
+pub use verdict::TrustThresholds;
 pub use search::{global_search, search};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};

@@ -82,7 +82,7 @@ pub(super) fn multires_search(
         ));
         let mut next = Vec::with_capacity(survivors * CHILDREN_PER_SURVIVOR);
         for s in scored[..survivors].iter().chain(&heads) {
-            problem.lattice.children(&s.cand, &mut next);
+            problem.lattice.children(&s.cand, level, &mut next);
         }
         next.sort_unstable();
         next.dedup();

@@ -192,9 +192,13 @@ pub struct SearchParams {
     /// angular step `dθ = cell / R` (5.6) (default 30 m, or less when the scan is smaller).
     pub max_range: f64,
     /// Two finest-level survivors farther apart than this (metres, or `ambiguity_angle`)
-    /// count as distinct solutions in [`super::Alignment::ambiguity`] (default 1 m).
+    /// count as distinct solutions in [`super::Alignment::ambiguity`] and as distinct
+    /// hypotheses ([`Self::distinct_hypotheses`]); also the margin a window search's answer
+    /// must keep from the window's edge ([`super::verdict`], test 7) (default 0.5 m: rows
+    /// of desks and shelves repeat every 0.5-2 m, and a coarser value merged a look-alike
+    /// 0.5 m away into the best's cluster).
     pub ambiguity_distance: f64,
-    /// See `ambiguity_distance` (default 10°).
+    /// See `ambiguity_distance` (default 5°).
     pub ambiguity_angle: f64,
     /// Distinct hypotheses the multi-resolution search carries from every level to the next
     /// besides the poses within `keep_ratio` (default 8): the best poses of the level that
@@ -322,8 +326,8 @@ impl Default for SearchParams {
             max_survivors: 0,
             max_scan_voxels: 3000,
             max_range: 30.0,
-            ambiguity_distance: 1.0,
-            ambiguity_angle: 10f64.to_radians(),
+            ambiguity_distance: 0.5,
+            ambiguity_angle: 5f64.to_radians(),
             distinct_hypotheses: 8,
             search: SearchMode::MultiResolution,
             horizontal_share: 0.25,

@@ -1,17 +1,22 @@
 //! Registration: the global search, the ICP refinement, and an honest verdict.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
-use super::consistency::{consistency, Consistency};
-use super::icp::{refine, IcpParams, IcpResult};
+use super::consistency::Consistency;
+use super::icp::{IcpParams, IcpResult};
 use super::lattice::Alignment;
 use super::search::global_search;
 use super::target::SearchTarget;
-use super::verdict::{agreement_doubts, refinement_doubts, search_doubts, TrustThresholds};
+use super::verdict::{
+    agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, window_doubts,
+    TrustThresholds,
+};
+use super::verify::{verify, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
-use crate::geometry::{Aabb, Pose};
+use crate::geometry::Pose;
 use crate::occupancy::OccupancyList;
 
 /// Parameters of [`register`] and [`localize`]. The default refines with ICP.
@@ -47,6 +52,9 @@ pub struct Registration {
     /// How the two scans agree where both looked, at the refined pose (computed when the
     /// refinement ran; see [`super::consistency`]).
     pub consistency: Option<Consistency>,
+    /// The search's best and strongest rivals, refined and scored ([`super::verify`]);
+    /// `None` when the search failed its own tests or refinement is off.
+    pub verification: Option<Verification>,
     /// Whether every trust test passed (the rule: [`super::verdict`]).
     pub trusted: bool,
     /// The trust tests that failed, in words.
@@ -75,55 +83,58 @@ fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
 }
 
 /// What the refinement and the agreement check work against: the prepared target (its
-/// finest level and free space) and its points, cropped to the reach of the search's pose.
-struct Against<'a, F: FnOnce() -> PointCloud> {
+/// finest level and free space) and its points (cropped around each hypothesis).
+struct Against<'a> {
     target: &'a SearchTarget,
-    points: F,
+    /// Made only when a hypothesis is refined (a map's voxel centres cost a pass).
+    points: &'a dyn Fn() -> Cow<'a, PointCloud>,
 }
 
-fn finish<F: FnOnce() -> PointCloud>(
+fn finish(
     source: &PointCloud,
-    against: Against<'_, F>,
+    against: Against<'_>,
     search: Alignment,
     params: &RegisterParams,
     start: Instant,
 ) -> Result<Registration> {
     let resolution = against.target.resolution();
-    // A search that already fails its own tests is not refined: ICP cannot make an
-    // ambiguous or barely overlapping match trustworthy, and skipping it saves the most
-    // expensive part of every hopeless attempt (map building tries many).
-    let mut doubts = search_doubts(&search, &params.trust);
-    let (refinement, consistency) = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
+    // A search that already fails its own tests is not refined: ICP cannot make a barely
+    // overlapping match trustworthy, and skipping it saves the most expensive part of
+    // every hopeless attempt (map building tries many).
+    let mut doubts = search_doubts(&search, params.search.region, &params.trust);
+    let verification = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
         (Some(p), true) => {
+            let icp = refinement_after_search(p, resolution);
+            let reach = icp.max_distance_start;
             let points = (against.points)();
-            let r = refine(
+            Some(verify(
                 source,
+                against.target,
                 &points,
-                &search.pose,
-                &refinement_after_search(p, resolution),
-            )?;
-            let at = if r.converged { r.pose } else { search.pose };
-            let c = consistency(source, against.target, Some(&points), &at)?;
-            (Some(r), Some(c))
+                &search,
+                &icp,
+                reach,
+            )?)
         }
-        _ => (None, None),
+        _ => None,
     };
-    let pose = match &refinement {
-        Some(r) if r.converged => r.pose,
-        _ => search.pose,
+    let (pose, refinement, consistency) = match &verification {
+        Some(v) => {
+            let w = v.winner();
+            doubts.extend(uniqueness_doubts(v, &params.trust));
+            doubts.extend(refinement_doubts(
+                &w.start,
+                &w.refinement,
+                resolution,
+                params.search.dof,
+                &params.trust,
+            ));
+            doubts.extend(agreement_doubts(&w.consistency, &params.trust));
+            doubts.extend(window_doubts(&w.start.pose, &params.search));
+            (w.pose(), Some(w.refinement.clone()), Some(w.consistency))
+        }
+        None => (search.pose, None, None),
     };
-    if let Some(r) = &refinement {
-        doubts.extend(refinement_doubts(
-            &search,
-            r,
-            resolution,
-            params.search.dof,
-            &params.trust,
-        ));
-    }
-    if let Some(c) = &consistency {
-        doubts.extend(agreement_doubts(c, &params.trust));
-    }
     Ok(Registration {
         pose,
         trusted: doubts.is_empty(),
@@ -131,6 +142,7 @@ fn finish<F: FnOnce() -> PointCloud>(
         search,
         refinement,
         consistency,
+        verification,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -174,27 +186,11 @@ pub fn register_to_split(
     let source = refine_source;
     let start = Instant::now();
     let search = global_search(search_source, target, &params.search)?;
-    let res = target.pyramid().base().resolution();
-    // Refine against the part of the target the source can reach from the search's pose
-    // (a large map is mostly out of reach; ICP's cost grows with its target).
-    let reach = params
-        .refine
-        .as_ref()
-        .map_or(0.0, |p| refinement_after_search(p, res).max_distance_start);
-    let crop = |pose: &Pose| {
-        let b = source.transformed(pose).bounding_box()?;
-        let m = nalgebra::Vector3::repeat(reach);
-        Some(Aabb::new(b.min - m, b.max + m))
-    };
-    let reachable = crop(&search.pose);
     finish(
         source,
         Against {
             target,
-            points: || match reachable {
-                Some(b) => refine_target.crop_box(&b),
-                None => refine_target.clone(),
-            },
+            points: &|| Cow::Borrowed(refine_target),
         },
         search,
         params,
@@ -226,7 +222,7 @@ pub fn localize(
         source,
         Against {
             target: &target,
-            points: || map.to_cloud(),
+            points: &|| Cow::Owned(map.to_cloud()),
         },
         search,
         params,

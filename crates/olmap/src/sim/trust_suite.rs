@@ -11,6 +11,8 @@
 //! floor. The truth is `T_target_source`; "right" means within [`RIGHT_TRANSLATION`] and
 //! [`RIGHT_ROTATION`] of it (the 0.3 m / 3°).
 
+use std::sync::Arc;
+
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
@@ -144,6 +146,10 @@ pub struct TrustCase {
     /// Fraction of the source's 0.1 m voxels that meet the target's at the truth (0 without
     /// one).
     pub true_overlap: f64,
+    /// The world the target scan was taken in.
+    pub world: Arc<World>,
+    /// The target robot's pose in it, `T_world_robot`.
+    pub t_world_target: Pose,
 }
 
 impl TrustCase {
@@ -155,6 +161,52 @@ impl TrustCase {
             dt <= RIGHT_TRANSLATION && dr <= RIGHT_ROTATION
         })
     }
+
+    /// Whether a wrong `pose` (`T_target_source`) is an **alias**: the source scan is what
+    /// the robot would have seen there, so no verdict on these two scans could tell it
+    /// from the truth. The target's world is scanned again from the robot pose `pose`
+    /// puts the source at; the pose is an alias when at least [`ALIAS_AGREEMENT`] of the
+    /// source's 0.1 m voxels lie within one cell of that scan's and (for whole scans) the
+    /// other way round. Partial views, outlier-laden scans and pieces are checked one way
+    /// only (the scan they come from is larger).
+    pub fn is_alias(&self, pose: &Pose) -> Result<bool> {
+        let rig = Rig::new();
+        let seen = rig.scan(&self.world, &(self.t_world_target * *pose), 0x0a11a5, 2);
+        let (s, r) = (voxels(&self.source)?, voxels(&seen)?);
+        let one_way = near_fraction(&s, &r) >= ALIAS_AGREEMENT;
+        Ok(match self.scene {
+            TrustScene::Partial | TrustScene::Outliers | TrustScene::Subset => one_way,
+            _ => one_way && near_fraction(&r, &s) >= ALIAS_AGREEMENT,
+        })
+    }
+}
+
+/// Share of voxels that must agree for a wrong pose to count as an alias
+/// ([`TrustCase::is_alias`]).
+pub const ALIAS_AGREEMENT: f64 = 0.9;
+
+fn voxels(c: &PointCloud) -> Result<OccupancyList> {
+    OccupancyList::from_cloud(c, 0.1)
+}
+
+/// The fraction of `a`'s voxels with a voxel of `b` within one cell.
+fn near_fraction(a: &OccupancyList, b: &OccupancyList) -> f64 {
+    if a.is_empty() {
+        return 0.0;
+    }
+    let near = a
+        .iter()
+        .filter(|(k, _)| {
+            (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    (-1..=1).any(|dz| {
+                        b.count(crate::geometry::VoxelKey::new(k.x + dx, k.y + dy, k.z + dz)) > 0
+                    })
+                })
+            })
+        })
+        .count();
+    near as f64 / a.len() as f64
 }
 
 /// Translation (metres) and rotation (radians) between two poses.
@@ -242,40 +294,50 @@ fn inside(world: &World, x: f64, y: f64) -> bool {
         .is_some_and(|b| x > b.min.x + 0.4 && x < b.max.x - 0.4 && y > b.min.y + 0.4 && y < b.max.y - 0.4)
 }
 
+/// A drawn pair: the scans, the truth, and where the target was taken (for the alias test).
+struct Drawn {
+    source: PointCloud,
+    target: PointCloud,
+    truth: Option<Pose>,
+    world: Arc<World>,
+    t_world_target: Pose,
+}
+
 /// A two-scan pair of `world` from robot poses `a` (target) and `b` (source).
-fn pair(rig: &Rig, world: &World, a: Pose, b: Pose, seed: u64) -> (PointCloud, PointCloud, Pose) {
-    let target = rig.scan(world, &a, seed, 0);
-    let source = rig.scan(world, &b, seed, 1);
-    (source, target, a.inverse() * b)
+fn pair(rig: &Rig, world: &Arc<World>, a: Pose, b: Pose, seed: u64) -> Drawn {
+    Drawn {
+        target: rig.scan(world, &a, seed, 0),
+        source: rig.scan(world, &b, seed, 1),
+        truth: Some(a.inverse() * b),
+        world: Arc::clone(world),
+        t_world_target: a,
+    }
 }
 
 /// Lab or office, by the seed's parity.
-fn furnished(seed: u64) -> World {
-    if seed % 2 == 0 {
-        lab(seed)
-    } else {
-        office(seed)
-    }
+fn furnished(seed: u64) -> Arc<World> {
+    Arc::new(if seed % 2 == 0 { lab(seed) } else { office(seed) })
 }
 
 fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
     let rig = Rig::new();
-    let (source, target, truth) = match scene {
+    let d = match scene {
         TrustScene::SamePlace | TrustScene::Partial | TrustScene::Outliers => {
-            let (mut s, t, truth) = same_place(&rig, seed, rng)?;
+            let mut d = same_place(&rig, seed, rng)?;
             if scene == TrustScene::Partial {
-                s = sector(&s, random_yaw(rng), 120f64.to_radians());
+                d.source = sector(&d.source, random_yaw(rng), 120f64.to_radians());
             } else if scene == TrustScene::Outliers {
-                s = with_outliers(&s, rng);
+                d.source = with_outliers(&d.source, rng);
             }
-            (s, t, Some(truth))
+            d
         }
         TrustScene::LowOverlap => low_overlap(&rig, seed, rng)?,
         TrustScene::Subset => {
             let world = furnished(seed);
             let a = spot(&world, rng)?;
-            let t = rig.scan(&world, &robot_at(a.0, a.1, random_yaw(rng)), seed, 0);
-            let piece = piece_of(&t, 1.5, rng);
+            let at = robot_at(a.0, a.1, random_yaw(rng));
+            let target = rig.scan(&world, &at, seed, 0);
+            let piece = piece_of(&target, 1.5, rng);
             let moved = Pose::from_xyz_ypr(
                 rng.range(-2.0, 2.0),
                 rng.range(-2.0, 2.0),
@@ -284,7 +346,13 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
                 0.0,
                 0.0,
             );
-            (piece.transformed(&moved), t, Some(moved.inverse()))
+            Drawn {
+                source: piece.transformed(&moved),
+                target,
+                truth: Some(moved.inverse()),
+                world,
+                t_world_target: at,
+            }
         }
         TrustScene::Unrelated => {
             let worlds = [
@@ -300,9 +368,16 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             let (wa, wb) = (&worlds[i], &worlds[j]);
             let a = spot(wa, rng)?;
             let b = spot(wb, rng)?;
-            let t = rig.scan(wa, &robot_at(a.0, a.1, random_yaw(rng)), seed, 0);
-            let s = rig.scan(wb, &robot_at(b.0, b.1, random_yaw(rng)), seed, 1);
-            (s, t, None)
+            let at = robot_at(a.0, a.1, random_yaw(rng));
+            let target = rig.scan(wa, &at, seed, 0);
+            let source = rig.scan(wb, &robot_at(b.0, b.1, random_yaw(rng)), seed, 1);
+            Drawn {
+                source,
+                target,
+                truth: None,
+                world: Arc::new(wa.clone()),
+                t_world_target: at,
+            }
         }
         TrustScene::TwinRooms | TrustScene::DeskRows | TrustScene::SymmetricHall => {
             let (world, lo, hi) = match scene {
@@ -310,67 +385,70 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
                 TrustScene::DeskRows => (desk_hall(seed), 1.0, 5.0),
                 _ => (symmetric_hall(seed), 0.5, 10.0),
             };
+            let world = Arc::new(world);
             let a = spot(&world, rng)?;
             let b = spot_near(&world, rng, a, lo, hi)?;
-            let (s, t, truth) = pair(
+            pair(
                 &rig,
                 &world,
                 robot_at(a.0, a.1, random_yaw(rng)),
                 robot_at(b.0, b.1, random_yaw(rng)),
                 seed,
-            );
-            (s, t, Some(truth))
+            )
         }
         TrustScene::Corridor => {
-            let world = corridor(seed);
+            let world = Arc::new(corridor(seed));
             let x = rng.range(8.0, 32.0);
             let dx = rng.range(1.0, 6.0) * if rng.chance(0.5) { 1.0 } else { -1.0 };
             let yaw_a = if rng.chance(0.5) { 0.0 } else { std::f64::consts::PI };
             let yaw_b = yaw_a + rng.range(-0.5, 0.5);
-            let (s, t, truth) = pair(
+            pair(
                 &rig,
                 &world,
                 robot_at(x, 1.0 + rng.range(-0.3, 0.3), yaw_a),
                 robot_at(x + dx, 1.0 + rng.range(-0.3, 0.3), yaw_b),
                 seed,
-            );
-            (s, t, Some(truth))
+            )
         }
         TrustScene::Planar | TrustScene::TwoWalls => {
-            let world = if scene == TrustScene::Planar {
+            let world = Arc::new(if scene == TrustScene::Planar {
                 floor_only()
             } else {
                 two_walls()
-            };
+            });
             let a = (rng.range(1.0, 5.0), rng.range(1.0, 5.0));
             let b = (a.0 + rng.range(-2.0, 2.0), a.1 + rng.range(-2.0, 2.0));
             let b = (b.0.max(0.8), b.1.max(0.8));
-            let (s, t, truth) = pair(
+            pair(
                 &rig,
                 &world,
                 robot_at(a.0, a.1, random_yaw(rng)),
                 robot_at(b.0, b.1, random_yaw(rng)),
                 seed,
-            );
-            (s, t, Some(truth))
+            )
         }
     };
-    let true_overlap = truth.map_or(Ok(0.0), |t| overlap_at(&source, &target, &t))?;
+    let true_overlap = match d.truth {
+        Some(t) => overlap_at(&d.source, &d.target, &t)?,
+        None => 0.0,
+    };
     Ok(TrustCase {
         scene,
         name: String::new(),
-        source,
-        target,
-        truth,
+        source: d.source,
+        target: d.target,
+        truth: d.truth,
         true_overlap,
+        world: d.world,
+        t_world_target: d.t_world_target,
     })
 }
 
 /// Two scans 0.5-3 m apart in one furnished world that share at least 30 % of the source's
 /// voxels (up to 60 draws; the best otherwise).
-fn same_place(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<(PointCloud, PointCloud, Pose)> {
+fn same_place(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<Drawn> {
     let world = furnished(seed);
-    let mut best: Option<(f64, (PointCloud, PointCloud, Pose))> = None;
+    let mut best: Option<(f64, Drawn)> = None;
     for _ in 0..60 {
         let a = spot(&world, rng)?;
         let b = spot_near(&world, rng, a, 0.5, 3.0)?;
@@ -381,7 +459,10 @@ fn same_place(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<(PointCloud, Poi
             robot_at(b.0, b.1, random_yaw(rng)),
             seed,
         );
-        let f = overlap_at(&p.0, &p.1, &p.2)?;
+        let f = match p.truth {
+            Some(t) => overlap_at(&p.source, &p.target, &t)?,
+            None => 0.0,
+        };
         if f >= 0.3 {
             return Ok(p);
         }
@@ -395,24 +476,27 @@ fn same_place(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<(PointCloud, Poi
 
 /// Pairs of one world drawn until the true overlap is 5-15 % (up to 60 tries; the last
 /// draw otherwise).
-fn low_overlap(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<(PointCloud, PointCloud, Option<Pose>)> {
+fn low_overlap(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<Drawn> {
     let world = furnished(seed);
     let mut last = None;
     for _ in 0..60 {
         let a = spot(&world, rng)?;
         let b = spot_near(&world, rng, a, 2.0, 9.0)?;
-        let (s, t, truth) = pair(
+        let d = pair(
             rig,
             &world,
             robot_at(a.0, a.1, random_yaw(rng)),
             robot_at(b.0, b.1, random_yaw(rng)),
             seed,
         );
-        let f = overlap_at(&s, &t, &truth)?;
+        let f = match d.truth {
+            Some(t) => overlap_at(&d.source, &d.target, &t)?,
+            None => 0.0,
+        };
         if (0.05..=0.15).contains(&f) {
-            return Ok((s, t, Some(truth)));
+            return Ok(d);
         }
-        last = Some((s, t, Some(truth)));
+        last = Some(d);
     }
     last.ok_or_else(|| Error::InvalidArgument("no low-overlap pair".into()))
 }

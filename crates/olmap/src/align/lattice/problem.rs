@@ -257,6 +257,20 @@ pub(crate) fn prepare<'a>(
         range,
         searched_t: [true, true, search_z],
         searched_r: [true, tilt.is_some(), tilt.is_some()],
+        bounds: match params.region {
+            Region::Window { xy, z, yaw } => {
+                let tilt_extent = tilt.map(|t| 2.0 * t);
+                Some((
+                    [2.0 * xy, 2.0 * xy, if search_z { 2.0 * z } else { 0.0 }],
+                    [
+                        (yaw < std::f64::consts::PI).then_some(2.0 * yaw),
+                        tilt_extent,
+                        tilt_extent,
+                    ],
+                ))
+            }
+            _ => None,
+        },
     };
     let e = bbox.extent();
     Ok(Problem {
