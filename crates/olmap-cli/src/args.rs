@@ -49,11 +49,16 @@ pub fn progress(len: u64, what: &str, quiet: bool) -> ProgressBar {
     bar
 }
 
-/// Sets the number of worker threads (0: one per core).
+/// Sets the number of worker threads (0: one per core), capped at the machine's parallelism
+/// ([`olmap::limits::thread_count`]) with a warning on stderr when the cap acts.
 pub fn set_threads(threads: usize) -> anyhow::Result<()> {
-    if threads > 0 {
+    let count = olmap::limits::thread_count(threads);
+    if let Some(note) = count.note() {
+        eprintln!("warning: --threads: {note}");
+    }
+    if count.threads > 0 {
         rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
+            .num_threads(count.threads)
             .build_global()
             .context("cannot set the number of threads")?;
     }
@@ -135,7 +140,8 @@ impl DofArgs {
 /// The worker-thread count of a command.
 #[derive(Args)]
 pub struct ThreadsArgs {
-    /// Worker threads (0: one per core).
+    /// Worker threads (0: one per core; at most the machine's cores, more are capped with
+    /// a warning).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
 }

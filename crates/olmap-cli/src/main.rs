@@ -3,6 +3,13 @@
 //! Every command has `--help`; commands that compute something have `--json` for scripts.
 //! Errors are printed as one line naming the file and the reason, with a non-zero exit
 //! status (1 for a failure, 2 for a bad command line).
+//!
+//! A closed standard output (`olmap info --json FILE | head -1`) ends the program quietly,
+//! as it ends any Unix tool: the default action of SIGPIPE is restored at start (Rust
+//! ignores the signal and turns every write to a closed pipe into an error, which
+//! `println!` turns into a panic). The process then ends by the signal (the shell shows
+//! status 141) with nothing on stderr. This covers every print of every command, clap's
+//! help included, without routing each through a special writer.
 
 mod args;
 mod commands;
@@ -82,12 +89,39 @@ enum Command {
     /// The navigation grid of a map (thesis §7.3): free / occupied / unknown cells in a
     /// robot-height band, ray traced from the scan poses; writes a ROS map (PGM + YAML).
     Navgrid(commands::navgrid::NavgridArgs),
+    /// Pose graphs (g2o files): optimise one (sparse Levenberg-Marquardt on the manifold,
+    /// chordal initialisation, robust kernels) or describe it.
+    Graph(commands::graph::GraphArgs),
     /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
     /// segment.
     Query(commands::query::QueryArgs),
 }
 
+/// Restores the default action of SIGPIPE (end the process), which the Rust runtime sets to
+/// "ignore" before `main`.
+#[cfg(unix)]
+fn quiet_on_closed_pipe() {
+    // SAFETY: `signal` with SIG_DFL installs no handler (no Rust code runs in signal
+    // context); it is called first thing in `main`, before any thread is started.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+/// Elsewhere a write to a closed pipe stays an error (reported by [`main`] quietly).
+#[cfg(not(unix))]
+fn quiet_on_closed_pipe() {}
+
+/// Whether an error is (caused by) a write to a closed pipe.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
 fn main() -> ExitCode {
+    quiet_on_closed_pipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(a) => commands::info::run(&a),
@@ -111,11 +145,14 @@ fn main() -> ExitCode {
         Command::Render(a) => commands::render::run(&a),
         Command::Navgrid(a) => commands::navgrid::run(&a),
         Command::Query(a) => commands::query::run(&a),
+        Command::Graph(a) => commands::graph::run(&a),
     };
     match result {
         Ok(code) => code,
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // Each cause once: olmap's errors name their cause in their own message.
+            eprintln!("error: {}", olmap::error::chain_message(e.chain()));
             ExitCode::FAILURE
         }
     }

@@ -1399,3 +1399,69 @@ fn audit_killed_run_leaves_no_partial_output() {
     assert!(r.status.success());
     assert_eq!(visible_names(&out), complete);
 }
+
+/// `olmap graph optimise` on parking-garage from the file's values: the JSON keys of the
+/// issue, the published costs in Ceres' convention (README §5: 8,362.72 -> 0.6348), and
+/// the written file's cost re-evaluated by `olmap graph info`.
+#[test]
+fn graph_optimise_json_and_the_written_file_cost() {
+    let Some(d) = data() else { return };
+    let input = d.join("pose_graphs/parking-garage.g2o");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("opt.g2o");
+    let v = json(&olmap(&[
+        "graph",
+        "optimise",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--init",
+        "none",
+        "--iterations",
+        "50",
+        "--json",
+    ]));
+    for key in [
+        "initial_cost",
+        "final_cost",
+        "iterations",
+        "seconds",
+        "cost_convention",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["cost_convention"], "ceres");
+    assert_eq!(v["space"], "se3");
+    assert_eq!(v["nodes"], 1661);
+    assert_eq!(v["edges"], 6275);
+    let initial = v["initial_cost"].as_f64().unwrap();
+    assert!((initial - 8362.72).abs() < 0.01, "{initial}");
+    let fin = v["final_cost"].as_f64().unwrap();
+    assert!(fin <= 0.63485 && fin > 0.6348 * 0.998, "{fin}");
+    let info = json(&olmap(&["graph", "info", "--json", out.to_str().unwrap()]));
+    let written = info["cost_ceres"].as_f64().unwrap();
+    assert!((written - fin).abs() <= 1e-9 * fin, "{written} vs {fin}");
+}
+
+#[test]
+fn graph_optimise_refuses_a_bad_file_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.g2o");
+    std::fs::write(
+        &bad,
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0\n",
+    )
+    .unwrap();
+    let out_path = dir.path().join("out.g2o");
+    let out = olmap(&[
+        "graph",
+        "optimise",
+        bad.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.g2o") && err.contains("line 3"), "{err}");
+    assert!(!out_path.exists());
+}

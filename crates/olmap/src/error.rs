@@ -13,7 +13,7 @@
 //! | [`Error::UnknownFormat`], [`Error::Read`] | a file is not what it claims (path, format, line) | [`crate::io::read_cloud`], [`crate::occupancy::read_map`], [`crate::io::read_poses`] |
 //! | [`Error::Write`] | a write failed; the target is untouched | [`crate::file::write_atomic`] and every writer |
 //! | [`Error::EmptyInput`] | nothing to work on: wait for data or pick another input | registration with an empty target or no source point in range, [`crate::mapping::build_map`] without scans, [`crate::team::map_team`] on an empty store, [`crate::io::scan_files`] finding no scan |
-//! | [`Error::TooLarge`] | over a limit olmap enforces: ask for less | the exact search's bound grids, 2D and navigation grids beyond their cell limits |
+//! | [`Error::TooLarge`] | over a limit olmap enforces: ask for less | a memory estimate over [`crate::limits::MAX_ESTIMATE_BYTES`] (a search's uniform start, a simulation, an overlap surface), the exact search's bound grids and work, 2D and navigation grids beyond their cell limits, a `.bz2` file that decompresses beyond its limit, a `.bt` octree that expands beyond its voxel limit, a point whose voxel key is outside the representable range |
 //! | [`Error::Unsupported`] | a valid request olmap does not do | reserved for format variants and mode combinations |
 //! | [`Error::NotFound`] | a name is not where it was looked up | [`crate::mapping::odometry_for`] (a scan without an odometry pose), [`crate::mapping::run_map_job`] (no scan of the first scan's name) |
 //! | [`Error::InvalidArgument`] | a bad parameter value or a contradiction between parameters | parameter checks everywhere |
@@ -68,6 +68,16 @@ pub enum ParseError {
     /// A valid file using a feature this reader does not support.
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// The stream asks for more than a limit the reader enforces (decompressed bytes, an
+    /// octree's expanded voxels, a whole-file text format's size): reading stopped before
+    /// the memory was spent. The path-level readers turn it into [`Error::TooLarge`].
+    #[error("too large: {what} (limit {limit})")]
+    TooLarge {
+        /// What was too large, with its size or the estimate of it.
+        what: String,
+        /// The limit, with its unit.
+        limit: String,
+    },
 }
 
 impl ParseError {
@@ -165,6 +175,24 @@ pub enum Error {
 }
 
 impl Error {
+    /// Wraps a stream parser's error with the path and format of the file it read: an
+    /// [`Error::Read`], except for [`ParseError::TooLarge`], which becomes an
+    /// [`Error::TooLarge`] naming the path (the file may be valid; it asks for too much).
+    pub fn read(path: impl Into<PathBuf>, format: &'static str, source: ParseError) -> Self {
+        let path = path.into();
+        match source {
+            ParseError::TooLarge { what, limit } => Error::TooLarge {
+                what: format!("{}: {format}: {what}", path.display()),
+                limit,
+            },
+            source => Error::Read {
+                path,
+                format,
+                source,
+            },
+        }
+    }
+
     /// Wraps an IO error with the path it concerns.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
@@ -176,3 +204,34 @@ impl Error {
 
 /// `Result` with the library's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// The one-line message of an error and its causes (`error.source()`, then its source, ...),
+/// joined with `": "`, each said once.
+///
+/// olmap's errors already name their cause in their own message (`scan.pcd: not a valid
+/// PCD file: line 4: ...`) and also return it as their [`std::error::Error::source`], as
+/// does `std::io::Error` inside them; a front end that prints the whole chain (anyhow's
+/// `{:#}`) would say every cause twice. This skips a cause whose text the message already
+/// holds, and keeps the rest (a front end's own context, say).
+///
+/// ```
+/// use olmap::error::{chain_message, Error, ParseError};
+/// let e = Error::read("scan.xyz", "XYZ text", ParseError::line(2, "expected x y z"));
+/// let chain = [&e as &(dyn std::error::Error + 'static), std::error::Error::source(&e).unwrap()];
+/// assert_eq!(chain_message(chain), "scan.xyz: not a valid XYZ text file: line 2: expected x y z");
+/// ```
+pub fn chain_message<'a>(
+    chain: impl IntoIterator<Item = &'a (dyn std::error::Error + 'static)>,
+) -> String {
+    let mut message = String::new();
+    for e in chain {
+        let text = e.to_string();
+        if message.is_empty() {
+            message = text;
+        } else if !message.contains(&text) {
+            message.push_str(": ");
+            message.push_str(&text);
+        }
+    }
+    message
+}

@@ -44,9 +44,13 @@ pub mod error;
 pub mod file;
 #[cfg(any(test, feature = "test-support"))]
 pub mod fixtures;
+#[cfg(any(test, feature = "test-support"))]
+pub mod fuzz;
 pub mod geometry;
+pub mod graph;
 pub mod grid2d;
 pub mod io;
+pub mod limits;
 pub mod mapping;
 pub mod occupancy;
 pub mod progress;

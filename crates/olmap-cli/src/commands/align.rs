@@ -68,6 +68,11 @@ pub struct AlignArgs {
     /// guaranteed).
     #[arg(long, value_enum, default_value = "multires")]
     pub search: SearchArg,
+    /// The exact search's work limit, in voxel bounds (one node bounded over one scan
+    /// voxel): past it the search stops with an error instead of running for hours where
+    /// every pose scores alike (a floor against a floor). Default: the library's.
+    #[arg(long, value_name = "N")]
+    pub exact_max_work: Option<f64>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -89,6 +94,12 @@ fn guess(s: &str) -> anyhow::Result<Pose> {
             .first()
             .map(|p| p.pose)
             .with_context(|| format!("{s}: no pose in the file"));
+    }
+    if !s.contains(',') {
+        bail!(
+            "--guess: '{s}' is neither a pose x,y,z,yaw,pitch,roll (metres, degrees) nor a pose \
+             file: there is no file of that name"
+        );
     }
     parse_pose(s, "--guess")
 }
@@ -126,6 +137,12 @@ fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
             search: match a.search {
                 SearchArg::Multires => SearchMode::MultiResolution,
                 SearchArg::Exact => SearchMode::Exact,
+            },
+            exact_max_work: match a.exact_max_work {
+                // A float on the command line (`1e11`); the library checks it is >= 1.
+                Some(w) if w.is_finite() && w >= 0.0 => w.min(u64::MAX as f64) as u64,
+                Some(w) => bail!("--exact-max-work must be a number >= 1, got {w}"),
+                None => align::EXACT_MAX_WORK,
             },
             ..Default::default()
         },

@@ -20,7 +20,7 @@ pub struct BenchArgs {
     /// thesis map at 0.05 m, fewer scans. Its numbers are not comparable with a full run.
     #[arg(long)]
     pub quick: bool,
-    /// Largest thread count of the scaling run (default: all cores).
+    /// Largest thread count of the scaling run (default and most: all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Runs of every timed measure; the median is reported (default: 5, 1 with --quick).
@@ -115,10 +115,14 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     if a.trust {
         return run_trust(a);
     }
-    let max_threads = if a.threads > 0 {
-        a.threads
+    let count = olmap::limits::thread_count(a.threads);
+    if let Some(note) = count.note() {
+        eprintln!("warning: --threads: {note}");
+    }
+    let max_threads = if count.threads > 0 {
+        count.threads
     } else {
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        count.limit
     };
     let options = BenchOptions {
         data: data_dir(a),

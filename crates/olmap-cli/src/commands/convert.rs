@@ -4,7 +4,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::bail;
 use clap::{Args, ValueEnum};
 use nalgebra::Point3;
 use olmap::geometry::Aabb;
@@ -91,29 +90,23 @@ pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
         .as_deref()
         .map(|s| parse_pose(s, "--transform"))
         .transpose()?;
+    // The corners as given (not sorted): the library refuses an inverted box.
     let crop = a
         .crop
         .as_deref()
         .map(|s| parse_numbers::<6>(s, "--box"))
         .transpose()?
-        .map(|v| Aabb::new(Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])));
-    for (name, v) in [
-        ("--min-range", a.min_range),
-        ("--max-range", a.max_range),
-        ("--voxel", a.voxel),
-    ] {
-        if let Some(v) = v {
-            if !(v.is_finite() && v >= 0.0) {
-                bail!("{name} must be a non-negative number of metres, got {v}");
-            }
-        }
-    }
+        .map(|v| Aabb {
+            min: Point3::new(v[0], v[1], v[2]),
+            max: Point3::new(v[3], v[4], v[5]),
+        });
     let job = ConvertJob {
         input: a.input.clone(),
         output: a.output.clone(),
         read: ReadOptions {
             format: a.in_format,
             uos_valid_only: a.threedtk_valid,
+            ..Default::default()
         },
         write: WriteOptions {
             format: a.out_format,

@@ -39,6 +39,7 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<ExitCode> {
     let options = ReadOptions {
         format: args.format,
         uos_valid_only: args.threedtk_valid,
+        ..Default::default()
     };
     let mut json = Vec::new();
     let mut failed = false;

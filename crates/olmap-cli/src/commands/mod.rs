@@ -8,6 +8,7 @@ pub mod convert;
 pub mod demo;
 pub mod eval;
 pub mod export;
+pub mod graph;
 pub mod grid2d;
 pub mod info;
 pub mod map;

@@ -159,7 +159,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
     }
     olmap::sim::check_dataset_output(&a.output)?;
     let start = Instant::now();
-    let total = (a.robots * a.scans_per_robot) as u64;
+    let total = a.robots.saturating_mul(a.scans_per_robot) as u64;
     let bar = progress(total, "simulate", a.json);
     let data = simulate(&config, |done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();

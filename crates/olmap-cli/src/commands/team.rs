@@ -16,6 +16,7 @@ use crate::args::StageBars;
 #[derive(Args)]
 pub struct TeamArgs {
     /// A dataset folder written by `olmap simulate` (manifest.json, robotN/, sightings.csv).
+    /// A scan or pose file that cannot be read is skipped with a warning.
     pub dataset: PathBuf,
     /// Output folder (created if missing): team.olm / .ply / .bt, team_poses.txt,
     /// team.store, report.json, report.html (and solo/ with --solo).
@@ -35,8 +36,14 @@ pub struct TeamArgs {
 /// Runs `olmap team`.
 pub fn run(args: &TeamArgs) -> anyhow::Result<ExitCode> {
     let data = read_dataset(&args.dataset)?;
-    let store = data.to_store()?;
-    let truth = data.truth_list(&store);
+    let (store, skipped_scans) = data.to_store_skipping()?;
+    for s in data.skipped.iter().chain(&skipped_scans) {
+        eprintln!("warning: skipped {}: {}", s.path, s.reason);
+    }
+    let truth = data.has_truth().then(|| data.truth_list(&store));
+    if truth.is_none() {
+        eprintln!("warning: without every robot's ground truth the maps are not evaluated");
+    }
     let mut params = TeamParams::default();
     if args.no_clearing {
         params.clearing = None;
@@ -45,7 +52,7 @@ pub fn run(args: &TeamArgs) -> anyhow::Result<ExitCode> {
     let run = run_team_pipeline(
         &TeamJob {
             store: &store,
-            truth: Some(&truth),
+            truth: truth.as_ref(),
             params: &params,
             out: &args.out,
             solo: args.solo,

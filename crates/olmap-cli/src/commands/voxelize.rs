@@ -12,9 +12,10 @@ use crate::args::{parse_pose, set_threads, StageBars, ThreadsArgs};
 /// Arguments of `olmap voxelize`.
 ///
 /// Each cloud is placed in the map by its pose (from `--poses` or `--pose`, identity
-/// otherwise) and integrated either by its endpoints (default: every point adds 1 to its
-/// voxel) or with `--ray-trace` (each scan is one observation: its endpoint voxels gain
-/// `--hit`, stored voxels its rays pass through lose `--miss`).
+/// otherwise) and integrated either by its endpoints (default: every point adds `--hit`, 1,
+/// to its voxel) or with `--ray-trace` (each scan is one observation: its endpoint voxels
+/// gain `--hit`, stored voxels its rays pass through lose `--miss`). Counts stop at
+/// `--max-count` either way.
 #[derive(Args)]
 pub struct VoxelizeArgs {
     /// Point-cloud files (any format `olmap info` reads), in the sensor frame.
@@ -32,13 +33,14 @@ pub struct VoxelizeArgs {
     /// Ray tracing: rays longer than this are cut (free space only), metres.
     #[arg(long, default_value_t = 30.0)]
     pub max_range: f64,
-    /// Ray tracing: count added to an endpoint voxel, once per scan.
+    /// Count added to an endpoint voxel: once per scan with ray tracing, once per point
+    /// otherwise.
     #[arg(long, default_value_t = 1)]
     pub hit: u16,
     /// Ray tracing: count removed from a voxel a ray passes through, once per scan.
     #[arg(long, default_value_t = 1)]
     pub miss: u16,
-    /// Counts never exceed this (at most 1023).
+    /// Counts never exceed this (1 to 1023), with or without ray tracing.
     #[arg(long, default_value_t = MAX_COUNT)]
     pub max_count: u16,
     /// Poses `T_map_scan` of the clouds: an olmap pose list, a CSV pose table, or 3DTK

@@ -16,6 +16,7 @@ use super::params::{Dof, Locus, Region, SearchParams};
 use super::score::CellGrid;
 use super::score::DenseGrid;
 use super::score::RowGrid;
+use crate::error::Result;
 use crate::geometry::VoxelKey;
 use crate::occupancy::{OccupancyList, Pyramid};
 
@@ -219,18 +220,24 @@ fn distinct_heads(
     heads
 }
 
-/// The uniform start over the region at `level`.
+/// Memory per pose of a level, bytes: the candidate (24), its translation in its
+/// rotation group (12), its score (40) and the flattened scores (40), rounded up.
+const BYTES_PER_POSE: f64 = 128.0;
+
+/// The uniform start over the region at `level`; [`crate::Error::TooLarge`] when its
+/// memory estimate exceeds [`crate::limits::MAX_ESTIMATE_BYTES`] (a window of 1e5 m, a
+/// tilt range of 1e9 degrees), before anything is allocated.
 pub(super) fn initial_candidates(
     problem: &Problem,
     params: &SearchParams,
     target: &Pyramid,
     level: usize,
-) -> Vec<Cand> {
+) -> Result<Vec<Cand>> {
     let l = &problem.lattice;
+    let dth = l.dtheta(level);
+    let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0).saturating_add(1);
     let Some(([nyaw, ntilt, _], [nx, ny, nz])) = region_counts(problem, params, target, level)
     else {
-        let dth = l.dtheta(level);
-        let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
         let ntilt = match params.dof {
             Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
             _ => 1,
@@ -238,9 +245,19 @@ pub(super) fn initial_candidates(
         let Region::Locus(locus) = params.region else {
             unreachable!("region_counts covers the other regions")
         };
-        return locus_candidates(l, &locus, level, ntilt);
+        let cell = l.cell(level);
+        let k = 2.0 * (locus.slack / cell).round() + 1.0;
+        let kz = if l.searched_t[2] { k } else { 1.0 };
+        let poses = locus.samples(cell, dth) as f64 * k * k * kz * (ntilt as f64).powi(2);
+        check_start(poses, level, l.cell(level))?;
+        return Ok(locus_candidates(l, &locus, level, ntilt));
     };
-    let mut out = Vec::with_capacity((nx * ny * nz * nyaw * ntilt * ntilt).max(0) as usize);
+    let poses = [nx, ny, nz, nyaw, ntilt, ntilt]
+        .iter()
+        .map(|&n| n.max(0) as f64)
+        .product::<f64>();
+    check_start(poses, level, l.cell(level))?;
+    let mut out = Vec::with_capacity(poses as usize);
     for a in 0..nyaw {
         for b in 0..ntilt {
             for g in 0..ntilt {
@@ -257,7 +274,20 @@ pub(super) fn initial_candidates(
             }
         }
     }
-    out
+    Ok(out)
+}
+
+/// Refuses a uniform start of `poses` poses whose memory estimate is over the limit.
+fn check_start(poses: f64, level: usize, cell: f64) -> Result<()> {
+    crate::limits::check_memory(
+        || {
+            format!(
+                "the search's uniform start ({poses:.3e} poses at level {level}, {cell} m \
+                 cells; a smaller window, tilt range or target, or more levels, ask for fewer)"
+            )
+        },
+        poses * BYTES_PER_POSE,
+    )
 }
 
 /// The start of a locus search at `level`: the lattice poses nearest to samples of the

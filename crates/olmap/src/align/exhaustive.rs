@@ -20,7 +20,7 @@ pub fn exhaustive_search(
     let start = Instant::now();
     let problem = prepare(source, target, params)?;
     let t = Instant::now();
-    let cands = initial_candidates(&problem, params, &target.pyramid, 0);
+    let cands = initial_candidates(&problem, params, &target.pyramid, 0)?;
     let LevelScores {
         passed: scored,
         heads,

@@ -18,14 +18,14 @@ mod target;
 pub mod verdict;
 pub mod verify;
 
-pub use bnb::EXACT_MAX_AMBIGUITY;
+pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
 pub use consistency::{
     consistency, consistency_seen, source_view, Consistency, SideAgreement,
     MIN_SURFACE_NEIGHBOURS,
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
-pub use params::{Dof, Locus, Region, SearchMode, SearchParams};
+pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
     REFINE_REACH_CELLS,
@@ -51,6 +51,7 @@ pub fn align_clouds(
     target: &PointCloud,
     params: &SearchParams,
 ) -> Result<Alignment> {
+    params.validate()?;
     let levels = levels_for_clouds(source, target, params);
     let target = SearchTarget::from_cloud(target, params.resolution, levels)?;
     global_search(source, &target, params)

@@ -44,7 +44,7 @@ pub(super) fn multires_search(
         Region::Locus(_) => (target.pyramid.levels() - 1).min(LOCUS_START_LEVEL),
         _ => target.pyramid.levels() - 1,
     };
-    let mut cands = initial_candidates(&problem, params, &target.pyramid, top);
+    let mut cands = initial_candidates(&problem, params, &target.pyramid, top)?;
     let mut reports = Vec::new();
     for level in (0..=top).rev() {
         let t = Instant::now();

@@ -1,6 +1,7 @@
 //! Parameters of the global search.
 
 use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
 use crate::geometry::Pose;
 
 /// Which pose parameters the search explores.
@@ -221,9 +222,142 @@ pub struct SearchParams {
     /// Six-degree-of-freedom searches keep every voxel (horizontal surfaces fix roll and
     /// pitch).
     pub horizontal_share: f64,
+    /// The most work the exact search may do, in voxel bounds (a node bounded over one scan
+    /// voxel; default [`super::EXACT_MAX_WORK`]): past it the search stops with
+    /// [`crate::Error::TooLarge`] instead of running for hours on a scene where every pose
+    /// scores alike.
+    pub exact_max_work: u64,
 }
 
+/// The most pyramid levels a search may ask for.
+pub const MAX_LEVELS: usize = 12;
+
 impl SearchParams {
+    /// Checks every parameter against its documented range, naming the parameter, the
+    /// valid range and the value ([`Error::InvalidArgument`]); the searches and
+    /// [`super::register()`], [`super::localize`] call it before using them.
+    ///
+    /// Beyond each value's own range: `resolution` must not exceed `max_range` (the
+    /// angular step is `resolution / range`), a window's yaw half-range and the six-degree
+    /// tilt are at most 180°.
+    ///
+    /// ```
+    /// use olmap::align::SearchParams;
+    /// assert!(SearchParams::default().validate().is_ok());
+    /// let p = SearchParams { resolution: 40.0, ..Default::default() };
+    /// let e = p.validate().unwrap_err().to_string();
+    /// assert!(e.contains("resolution") && e.contains("max_range"), "{e}");
+    /// ```
+    pub fn validate(&self) -> Result<()> {
+        let bad = |what: String| Err(Error::InvalidArgument(format!("search parameters: {what}")));
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                bad(format!("{name} must be a finite number > 0, got {v}"))
+            }
+        };
+        positive("resolution (m)", self.resolution)?;
+        positive("max_range (m)", self.max_range)?;
+        if self.resolution > self.max_range {
+            return bad(format!(
+                "resolution ({} m) must not exceed max_range ({} m): the angular step is \
+                 resolution / range",
+                self.resolution, self.max_range
+            ));
+        }
+        if self.levels > MAX_LEVELS {
+            return bad(format!(
+                "levels must be 0 (automatic) to {MAX_LEVELS}, got {}",
+                self.levels
+            ));
+        }
+        if self.max_coarse_poses == 0 {
+            return bad("max_coarse_poses must be at least 1".into());
+        }
+        if !(self.keep_ratio > 0.0 && self.keep_ratio <= 1.0) {
+            return bad(format!(
+                "keep_ratio must be in (0, 1], got {}",
+                self.keep_ratio
+            ));
+        }
+        if self.max_scan_voxels == 0 {
+            return bad("max_scan_voxels must be at least 1".into());
+        }
+        if !(self.horizontal_share > 0.0 && self.horizontal_share <= 1.0) {
+            return bad(format!(
+                "horizontal_share must be in (0, 1], got {}",
+                self.horizontal_share
+            ));
+        }
+        if self.exact_max_work == 0 {
+            return bad("exact_max_work must be at least 1".into());
+        }
+        if !(self.ambiguity_distance.is_finite() && self.ambiguity_distance >= 0.0) {
+            return bad(format!(
+                "ambiguity_distance must be a finite number >= 0 m, got {}",
+                self.ambiguity_distance
+            ));
+        }
+        if !(self.ambiguity_angle.is_finite() && self.ambiguity_angle >= 0.0) {
+            return bad(format!(
+                "ambiguity_angle must be a finite number >= 0 rad, got {}",
+                self.ambiguity_angle
+            ));
+        }
+        let pose = self.prior.isometry();
+        let finite = pose.translation.vector.iter().all(|v| v.is_finite())
+            && pose.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            return bad("the prior pose must be finite".into());
+        }
+        let half_turn = std::f64::consts::PI;
+        match self.region {
+            Region::Global => {}
+            Region::Window { xy, z, yaw } => {
+                for (name, v) in [("xy (m)", xy), ("z (m)", z)] {
+                    if !(v.is_finite() && v >= 0.0) {
+                        return bad(format!(
+                            "the window's half-width {name} must be a finite number >= 0, \
+                             got {v}"
+                        ));
+                    }
+                }
+                if !((0.0..=half_turn).contains(&yaw)) {
+                    return bad(format!(
+                        "the window's yaw half-range must be 0 to 180 degrees, got {} degrees",
+                        yaw.to_degrees()
+                    ));
+                }
+            }
+            Region::Locus(l) => {
+                let values = [
+                    l.center[0],
+                    l.center[1],
+                    l.center[2],
+                    l.radius,
+                    l.phase,
+                    l.slack,
+                ];
+                if values.iter().any(|v| !v.is_finite()) || l.radius < 0.0 || l.slack < 0.0 {
+                    return bad(
+                        "a locus needs a finite centre and phase, radius >= 0 and slack >= 0"
+                            .into(),
+                    );
+                }
+            }
+        }
+        if let Dof::SixDof { max_tilt } = self.dof {
+            if !((0.0..=half_turn).contains(&max_tilt)) {
+                return bad(format!(
+                    "max_tilt must be 0 to 180 degrees, got {} degrees",
+                    max_tilt.to_degrees()
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The survivor cap in force (see `max_survivors`).
     pub fn survivor_cap(&self) -> usize {
         match (self.max_survivors, self.dof) {
@@ -260,7 +394,9 @@ impl SearchParams {
         if self.levels > 0 {
             return self.levels;
         }
-        let range = range.clamp(resolution, self.max_range);
+        // Not `clamp`: that panics on parameters `validate` refuses (resolution above
+        // max_range, NaN), and this rule runs before the searches check them.
+        let range = range.max(resolution).min(self.max_range);
         (5..=10)
             .find(|&l| self.coarse_poses_at(resolution, extent, range, l) <= self.max_coarse_poses)
             .unwrap_or(10)
@@ -279,15 +415,15 @@ impl SearchParams {
         range: f64,
         levels: usize,
     ) -> u64 {
-        let cell = resolution * (1u64 << (levels - 1)) as f64;
+        let cell = resolution * (1u64 << levels.saturating_sub(1).min(63)) as f64;
         let dth = cell / range;
-        let count = |e: f64, step: f64| (e / step).ceil().max(0.0) as u64 + 1;
+        let count = |e: f64, step: f64| ((e / step).ceil().max(0.0) as u64).saturating_add(1);
         let (nx, ny, nz, nyaw) = match self.region {
             Region::Global => (
                 count(extent.x, cell),
                 count(extent.y, cell),
                 count(extent.z, cell),
-                (std::f64::consts::TAU / dth).ceil() as u64,
+                (std::f64::consts::TAU / dth).ceil().max(1.0) as u64,
             ),
             Region::Window { xy, z, yaw } => (
                 count(2.0 * xy, cell),
@@ -309,7 +445,9 @@ impl SearchParams {
             Dof::SixDof { max_tilt } => count(2.0 * max_tilt, dth),
             _ => 1,
         };
-        nx * ny * nz * nyaw * ntilt * ntilt
+        [ny, nz, nyaw, ntilt, ntilt]
+            .into_iter()
+            .fold(nx, u64::saturating_mul)
     }
 }
 
@@ -331,6 +469,7 @@ impl Default for SearchParams {
             distinct_hypotheses: 8,
             search: SearchMode::MultiResolution,
             horizontal_share: 0.25,
+            exact_max_work: super::EXACT_MAX_WORK,
         }
     }
 }

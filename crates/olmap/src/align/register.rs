@@ -157,6 +157,7 @@ pub fn register(
     target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    params.search.validate()?;
     let levels = levels_for_clouds(source, target, &params.search);
     let t = SearchTarget::from_cloud(target, params.search.resolution, levels)?;
     register_to(source, &t, target, params)
@@ -211,6 +212,7 @@ pub fn localize(
     // so that their check is of the value in use.
     let mut search_params = params.search.clone();
     search_params.resolution = map.resolution();
+    search_params.validate()?;
     let extent = map
         .stats()
         .bbox

@@ -57,8 +57,12 @@ impl SearchTarget {
     /// Adds a scan placed at `pose` (`T_target_scan`): its endpoints join every level, its
     /// rays extend the free space. Only the new scan is traced: building a map scan by scan
     /// costs each scan once.
+    ///
+    /// A point whose voxel key is outside the representable range is an error naming it
+    /// ([`OccupancyList::check_keys`]): a target never silently loses points.
     pub fn add_scan(&mut self, cloud: &PointCloud, pose: &Pose) -> Result<()> {
         let mut endpoints = OccupancyList::new(self.pyramid.base().resolution())?;
+        endpoints.check_keys(cloud, pose, "the target")?;
         endpoints.add_points(cloud, pose, 1);
         self.pyramid.merge(&endpoints)?;
         for level in 0..self.pyramid.levels() {

@@ -96,9 +96,9 @@ impl Default for RwhtParams {
 /// ```
 pub fn detect_circles_rwht(scan: &LaserScan, radius: f64, params: &RwhtParams) -> Vec<Detection> {
     let step = scan.angle_increment.abs();
-    if radius.is_nan()
+    if !radius.is_finite()
         || radius <= 0.0
-        || params.cell.is_nan()
+        || !params.cell.is_finite()
         || params.cell <= 0.0
         || !step.is_finite()
         || step <= 0.0
@@ -162,10 +162,11 @@ impl Accumulator {
         let min = min - nalgebra::Vector2::new(grow, grow);
         let max = max + nalgebra::Vector2::new(grow, grow);
         let mut cell = cell;
+        // Saturating: a radius of 1e20 m asks for more than `usize::MAX` cells at first.
         let dims = |cell: f64| {
             (
-                ((max.x - min.x) / cell).ceil() as usize + 1,
-                ((max.y - min.y) / cell).ceil() as usize + 1,
+                (((max.x - min.x) / cell).ceil() as usize).saturating_add(1),
+                (((max.y - min.y) / cell).ceil() as usize).saturating_add(1),
             )
         };
         let (mut nx, mut ny) = dims(cell);
@@ -194,6 +195,10 @@ impl Accumulator {
                     + std::f64::consts::PI * k as f64 / samples as f64;
                 let cx = ((p.x + radius * beta.cos() - min.x) / cell) as usize;
                 let cy = ((p.y + radius * beta.sin() - min.y) / cell) as usize;
+                // Rounding can put a vote of a huge circle one cell past the grid.
+                if cx >= nx || cy >= self.ny {
+                    continue;
+                }
                 let idx = cy * nx + cx;
                 if idx != last {
                     self.acc[idx] += r as f32;
@@ -213,8 +218,8 @@ impl Accumulator {
             return None;
         }
         let mut peaks: Vec<(f32, usize, usize)> = Vec::new();
-        for y in 1..ny - 1 {
-            for x in 1..nx - 1 {
+        for y in 1..ny.saturating_sub(1) {
+            for x in 1..nx.saturating_sub(1) {
                 let v = acc[y * nx + x];
                 if (v as f64) < threshold {
                     continue;

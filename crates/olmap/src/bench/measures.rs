@@ -313,6 +313,8 @@ pub(super) fn mapping(quick: bool, repeat: usize) -> Result<MappingBench> {
 
 /// The pair's search on 1, 2, 4, ... threads and on `max_threads`.
 pub(super) fn scaling(p: &Pair, max_threads: usize, repeat: usize) -> Result<Vec<ThreadsBench>> {
+    // Never more threads than the machine runs at once (a pool of 100,000 exhausts it).
+    let max_threads = crate::limits::thread_count(max_threads.max(1)).threads;
     let mut counts = vec![1];
     while counts.last().copied().unwrap_or(1) * 2 <= max_threads {
         counts.push(counts.last().copied().unwrap_or(1) * 2);

@@ -26,7 +26,8 @@ pub struct BenchOptions {
     pub data: Option<PathBuf>,
     /// A small, fast set: the simulated pair only, a smaller thesis map, fewer scans.
     pub quick: bool,
-    /// Largest thread count of the scaling run (at least 1).
+    /// Largest thread count of the scaling run (at least 1; at most
+    /// [`crate::limits::max_threads`], larger counts are capped).
     pub max_threads: usize,
     /// Runs of every timed measure; the median is reported (at least 1).
     pub repeat: usize,

@@ -39,7 +39,9 @@ impl PointCloud {
     /// Voxel-grid downsampling: one point per occupied voxel of edge `resolution` metres, at
     /// the centroid of the voxel's points. Intensities and colours are averaged; normals are
     /// averaged and renormalised. Output order is the order in which voxels are first met,
-    /// so the result is deterministic.
+    /// so the result is deterministic. A point whose voxel key does not fit an `i32` (3 m at
+    /// 1 nm) is an error naming it ([`crate::geometry::key_range_error`]), never a dropped
+    /// point.
     ///
     /// ```
     /// use olmap::cloud::PointCloud;
@@ -75,7 +77,13 @@ impl PointCloud {
         for (i, p) in self.points().iter().enumerate() {
             let pd = p.cast::<f64>();
             let Some(key) = VoxelKey::from_point(&pd, resolution) else {
-                continue;
+                return Err(crate::geometry::key_range_error(
+                    "voxel downsampling",
+                    i,
+                    &pd,
+                    resolution,
+                    i32::MAX as i64,
+                ));
             };
             let slot = *index.entry(key).or_insert_with(|| {
                 accs.push(Acc::default());

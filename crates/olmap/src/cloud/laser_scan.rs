@@ -46,12 +46,39 @@ use nalgebra::Point3;
 
 use super::PointCloud;
 use crate::error::{ParseError, Result};
-use crate::file::text::for_each_line;
+use crate::file::text::{for_each_line, json_message};
 
 const MAGIC: &str = "# olmap laser scan v1";
 const PARAMS: &str = "angle_min,angle_increment,range_min,range_max,time";
 const FORMAT: &str = "olmap laser scan CSV";
 const FORMAT_JSON: &str = "olmap laser scan JSON";
+
+/// The largest laser-scan JSON read: 64 MiB (a scan of a million beams is about 20 MiB).
+/// The text is read whole before it is parsed, so an endless stream stops here.
+pub const MAX_JSON_BYTES: u64 = 64 << 20;
+
+/// The error for a negative range at beam `i` (0-based).
+fn negative_range(i: usize, r: f32) -> String {
+    format!("the range of beam {i} is {r}: a range is a distance, >= 0 (inf or NaN for no return)")
+}
+
+/// A JSON parse error at its line, said once: serde's message ends with "at line L column
+/// C", which the location already gives.
+fn json_error(e: serde_json::Error) -> ParseError {
+    use serde_json::error::Category;
+    let message = json_message(&e);
+    match e.classify() {
+        Category::Eof => ParseError::Truncated(message),
+        Category::Syntax => ParseError::line(
+            e.line(),
+            format!("column {}: invalid JSON: {message}", e.column()),
+        ),
+        _ => ParseError::line(
+            e.line(),
+            format!("column {}: not a laser scan: {message}", e.column()),
+        ),
+    }
+}
 
 /// The JSON layout, as written.
 #[derive(serde::Serialize)]
@@ -134,6 +161,48 @@ impl LaserScan {
     /// Whether the scan has no beams.
     pub fn is_empty(&self) -> bool {
         self.ranges.is_empty()
+    }
+
+    /// Checks the scan's parameters: `angle_min` and `time` finite, `angle_increment`
+    /// finite and not zero (it may be negative: a scanner sweeping clockwise), `range_min`
+    /// finite and `>= 0`, `range_max` above `range_min` (infinity allowed, NaN not), and
+    /// every range a distance: `>= 0`, or `inf`/NaN for no return. The error names the
+    /// field (and the beam) and the value found.
+    pub fn validate(&self) -> Result<(), String> {
+        self.validate_parameters()?;
+        match self.ranges.iter().position(|r| *r < 0.0) {
+            Some(i) => Err(negative_range(i, self.ranges[i])),
+            None => Ok(()),
+        }
+    }
+
+    /// [`LaserScan::validate`] without the ranges.
+    fn validate_parameters(&self) -> Result<(), String> {
+        let finite = |name: &str, v: f64| {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("{name} must be a finite number, found {v}"))
+            }
+        };
+        finite("angle_min", self.angle_min)?;
+        finite("angle_increment", self.angle_increment)?;
+        if self.angle_increment == 0.0 {
+            return Err(
+                "angle_increment must not be 0: every beam would point the same way".into(),
+            );
+        }
+        finite("range_min", self.range_min)?;
+        if self.range_min < 0.0 {
+            return Err(format!("range_min must be >= 0, found {}", self.range_min));
+        }
+        if self.range_max.is_nan() || self.range_max <= self.range_min {
+            return Err(format!(
+                "range_max must be above range_min ({}), found {}",
+                self.range_min, self.range_max
+            ));
+        }
+        finite("time", self.time)
     }
 
     /// Whether beam `i` has a valid return (finite, within `[range_min, range_max]`).
@@ -245,6 +314,9 @@ impl LaserScan {
                             ParseError::line(n, format!("value {} is not a number: '{f}'", k + 1))
                         })?;
                     }
+                    LaserScan::from_params(params)
+                        .validate_parameters()
+                        .map_err(|reason| ParseError::line(n, reason))?;
                 }
                 3 => {
                     with_int = match fields.as_slice() {
@@ -270,7 +342,11 @@ impl LaserScan {
                         f.parse::<f32>()
                             .map_err(|_| ParseError::line(n, format!("not a number: '{f}'")))
                     };
-                    ranges.push(parse(fields[0])?);
+                    let range = parse(fields[0])?;
+                    if range < 0.0 {
+                        return Err(ParseError::line(n, negative_range(ranges.len(), range)));
+                    }
+                    ranges.push(range);
                     if with_int {
                         ints.push(parse(fields[1])?);
                     }
@@ -290,14 +366,24 @@ impl LaserScan {
             _ => {}
         }
         Ok(LaserScan {
+            ranges,
+            intensities: with_int.then_some(ints),
+            ..LaserScan::from_params(params)
+        })
+    }
+
+    /// A scan without beams from the CSV parameter values
+    /// `angle_min, angle_increment, range_min, range_max, time`.
+    fn from_params(params: [f64; 5]) -> LaserScan {
+        LaserScan {
             angle_min: params[0],
             angle_increment: params[1],
             range_min: params[2],
             range_max: params[3],
             time: params[4],
-            ranges,
-            intensities: with_int.then_some(ints),
-        })
+            ranges: Vec::new(),
+            intensities: None,
+        }
     }
 
     /// Writes the scan as JSON (see the module documentation).
@@ -350,23 +436,20 @@ impl LaserScan {
 
     /// Reads a scan from JSON (see the module documentation); a `null` `range_max` reads
     /// as infinity.
-    pub fn read_json<R: std::io::Read>(mut reader: R) -> Result<Self, ParseError> {
+    pub fn read_json<R: std::io::Read>(reader: R) -> Result<Self, ParseError> {
         let mut text = String::new();
-        reader.read_to_string(&mut text)?;
+        use std::io::Read as _;
+        reader.take(MAX_JSON_BYTES + 1).read_to_string(&mut text)?;
+        if text.len() as u64 > MAX_JSON_BYTES {
+            return Err(ParseError::TooLarge {
+                what: format!("a laser scan JSON of more than {MAX_JSON_BYTES} bytes"),
+                limit: format!("{} MiB", MAX_JSON_BYTES >> 20),
+            });
+        }
         if text.trim().is_empty() {
             return Err(ParseError::Empty);
         }
-        let parsed: JsonIn = serde_json::from_str(&text).map_err(|e| {
-            use serde_json::error::Category;
-            match e.classify() {
-                Category::Eof => ParseError::Truncated(format!("{e}")),
-                Category::Syntax => ParseError::line(
-                    e.line(),
-                    format!("invalid JSON at column {}: {e}", e.column()),
-                ),
-                _ => ParseError::line(e.line(), format!("not a laser scan: {e}")),
-            }
-        })?;
+        let parsed: JsonIn = serde_json::from_str(&text).map_err(json_error)?;
         let intensities = parsed
             .intensities
             .filter(|v| !v.is_empty() || parsed.ranges.is_empty());
@@ -379,7 +462,7 @@ impl LaserScan {
                 )));
             }
         }
-        Ok(LaserScan {
+        let scan = LaserScan {
             angle_min: parsed.angle_min,
             angle_increment: parsed.angle_increment,
             range_min: parsed.range_min,
@@ -391,7 +474,9 @@ impl LaserScan {
                 .collect(),
             intensities,
             time: parsed.time,
-        })
+        };
+        scan.validate().map_err(ParseError::Malformed)?;
+        Ok(scan)
     }
 
     /// Writes the scan as JSON to a file atomically.

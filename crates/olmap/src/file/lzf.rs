@@ -71,6 +71,39 @@ pub enum LzfError {
     },
 }
 
+impl LzfError {
+    /// The offset in the stream of the instruction at fault (`None` when the stream as a
+    /// whole is too short).
+    pub fn position(&self) -> Option<usize> {
+        match *self {
+            LzfError::Truncated { at }
+            | LzfError::BadReference { at, .. }
+            | LzfError::TooLong { at, .. } => Some(at),
+            LzfError::TooShort { .. } => None,
+        }
+    }
+
+    /// What is wrong, without the position (for a caller that names the place itself,
+    /// as a byte offset in its file).
+    pub fn what(&self) -> String {
+        match *self {
+            LzfError::Truncated { .. } => "the LZF stream ends inside an instruction".into(),
+            LzfError::BadReference {
+                offset, available, ..
+            } => format!(
+                "an LZF back-reference reaches {offset} bytes back but only {available} bytes \
+                 have been produced"
+            ),
+            LzfError::TooLong { expected, .. } => {
+                format!("the LZF stream produces more than the expected {expected} bytes")
+            }
+            LzfError::TooShort { expected, found } => {
+                format!("the LZF stream produces {found} bytes, expected {expected}")
+            }
+        }
+    }
+}
+
 /// Decompresses an LZF stream that must produce exactly `expected_len` bytes.
 ///
 /// Every malformed stream (cut short, referring before the start of the output, producing

@@ -16,4 +16,5 @@ pub(crate) mod text;
 pub use atomic::{remove_stale_temporaries, write_atomic, STALE_AFTER};
 pub use outputs::{check_output, html_path_beside, OutputSet};
 pub(crate) use read::parse_file;
-pub use read::{open_buffered, read_bytes};
+pub use read::{open_buffered, read_bytes, read_bytes_at_most};
+pub use text::MAX_LINE_BYTES;

@@ -26,4 +26,4 @@ pub use pose_file::{NamedPose, PoseList};
 pub use pose_json::{NamedPoseJson, PoseJson};
 
 mod voxel;
-pub use voxel::VoxelKey;
+pub use voxel::{key_range_error, VoxelKey};

@@ -2,6 +2,8 @@
 
 use nalgebra::Point3;
 
+use crate::error::Error;
+
 /// The integer cell `floor(coord / resolution)` of a point, per axis.
 ///
 /// Floor, not truncation: a point at x = -0.01 m with 0.1 m voxels is in cell -1.
@@ -47,5 +49,38 @@ impl VoxelKey {
             (self.y as f64 + 0.5) * resolution,
             (self.z as f64 + 0.5) * resolution,
         )
+    }
+}
+
+/// The error for point `index` at `p` (metres) whose voxel key at `resolution` lies outside
+/// `±max_key` voxels per axis: [`Error::TooLarge`] naming `what` (the cloud), the point,
+/// its key and the extent the key range allows, never a silent wrap or drop.
+///
+/// ```
+/// use olmap::geometry::key_range_error;
+/// use nalgebra::Point3;
+/// let e = key_range_error("scan000.3d", 7, &Point3::new(3.0, 0.0, 0.0), 1e-9, 131_071);
+/// let text = e.to_string();
+/// assert!(text.contains("point 7") && text.contains("scan000.3d"), "{text}");
+/// ```
+pub fn key_range_error(
+    what: &str,
+    index: usize,
+    p: &Point3<f64>,
+    resolution: f64,
+    max_key: i64,
+) -> Error {
+    let key = p.coords.map(|c| (c / resolution).floor());
+    Error::TooLarge {
+        what: format!(
+            "{what}: point {index} at ({}, {}, {}) m has the voxel key ({:.0}, {:.0}, {:.0}) at \
+             {resolution} m, outside the representable keys (use a coarser resolution, or \
+             bring the points nearer the origin)",
+            p.x, p.y, p.z, key.x, key.y, key.z
+        ),
+        limit: format!(
+            "±{max_key} voxels per axis, ±{:.6} m at {resolution} m",
+            max_key as f64 * resolution
+        ),
     }
 }

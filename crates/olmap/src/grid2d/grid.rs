@@ -265,26 +265,28 @@ impl OccupancyGrid2d {
         let mut new_min = [0i64; 2];
         let mut new_max = [0i64; 2];
         for a in 0..2 {
+            // Saturating: at a resolution of 1e-20 m the keys are near i64's ends, and the
+            // size check below refuses the grid.
             if empty {
-                new_min[a] = min[a] - GROW_MARGIN;
-                new_max[a] = max[a] + GROW_MARGIN;
+                new_min[a] = min[a].saturating_sub(GROW_MARGIN);
+                new_max[a] = max[a].saturating_add(GROW_MARGIN);
                 continue;
             }
             let dim = cur_max[a] - cur_min[a] + 1;
             let margin = GROW_MARGIN.max(dim / 4);
             new_min[a] = if min[a] < cur_min[a] {
-                min[a] - margin
+                min[a].saturating_sub(margin)
             } else {
                 cur_min[a]
             };
             new_max[a] = if max[a] > cur_max[a] {
-                max[a] + margin
+                max[a].saturating_add(margin)
             } else {
                 cur_max[a]
             };
         }
-        let w = new_max[0] - new_min[0] + 1;
-        let h = new_max[1] - new_min[1] + 1;
+        let w = new_max[0].saturating_sub(new_min[0]).saturating_add(1);
+        let h = new_max[1].saturating_sub(new_min[1]).saturating_add(1);
         if w.checked_mul(h).is_none_or(|n| n as u64 > MAX_CELLS as u64) {
             return Err(too_big(w, h));
         }

@@ -49,7 +49,7 @@ pub mod sensor_model;
 pub mod trinary;
 
 pub use grid::{InsertStats, OccupancyGrid2d};
-pub use navigation::{navigation_grid, NavGridParams};
+pub use navigation::{navigation_grid, NavGridParams, MAX_NAV_RAY_STEPS};
 pub use pipeline::{run_grid2d, Grid2dJob, Grid2dRun};
 pub use raytrace::{bresenham, Bresenham};
 pub use report::{CellsReport, ExtentReport, Grid2dReport, NavgridReport};

@@ -11,6 +11,10 @@ use crate::occupancy::OccupancyList;
 
 /// Most cells a navigation grid may hold.
 const MAX_NAV_CELLS: usize = 1 << 26;
+/// The most ray steps a navigation grid may take (about a minute on one core): each
+/// distinct scan position casts `8 reach` rays of up to `reach` cells, or to the grid's
+/// edge. A range of 1e9 m at 0.1 m would otherwise cast 8e10 rays from every position.
+pub const MAX_NAV_RAY_STEPS: f64 = 1e10;
 
 /// How [`navigation_grid`] builds the grid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -115,8 +119,14 @@ pub fn navigation_grid(
         return Ok(TrinaryGrid::unknown(res, [0.0, 0.0, 0.0], 0, 0));
     }
     let m = params.margin_cells as i64;
-    let (lo, hi) = ((lo.0 - m, lo.1 - m), (hi.0 + m, hi.1 + m));
-    let (w, h) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
+    // Saturating: at a resolution of 1e-20 m the cells are near i64's ends, and the size
+    // check refuses the grid.
+    let (lo, hi) = (
+        (lo.0.saturating_sub(m), lo.1.saturating_sub(m)),
+        (hi.0.saturating_add(m), hi.1.saturating_add(m)),
+    );
+    let span = |a: i64, b: i64| b.saturating_sub(a).saturating_add(1) as usize;
+    let (w, h) = (span(lo.0, hi.0), span(lo.1, hi.1));
     if w.checked_mul(h).is_none_or(|n| n > MAX_NAV_CELLS) {
         return Err(Error::TooLarge {
             what: format!("a {w} x {h} navigation grid"),
@@ -134,7 +144,26 @@ pub fn navigation_grid(
             grid.cells[k] = Trinary::Occupied;
         }
     }
-    let reach = (params.max_range / res).floor() as i64;
+    let reach_cells = (params.max_range / res).floor();
+    let positions = scan_poses.len().max(1) as f64;
+    let steps = positions * 8.0 * reach_cells.max(1.0) * reach_cells.min((w + h) as f64);
+    if steps > MAX_NAV_RAY_STEPS {
+        return Err(Error::TooLarge {
+            what: format!(
+                "a navigation grid from {} positions with rays of {reach_cells:.3e} cells \
+                 ({} m at {res} m): {steps:.3e} ray steps; use a smaller max_range",
+                scan_poses.len(),
+                params.max_range
+            ),
+            limit: format!("{MAX_NAV_RAY_STEPS:.0e} ray steps"),
+        });
+    }
+    // The targets of one position are listed before they are cast.
+    crate::limits::check_memory(
+        || format!("the ray targets of a navigation grid with rays of {reach_cells:.3e} cells"),
+        8.0 * reach_cells * 16.0,
+    )?;
+    let reach = reach_cells as i64;
     let reach2 = reach * reach;
     let mut seen: FxHashSet<(i64, i64)> = FxHashSet::default();
     for &s in &sources {

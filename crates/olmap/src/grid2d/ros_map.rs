@@ -29,10 +29,12 @@ use std::path::{Path, PathBuf};
 
 use super::trinary::{Thresholds, Trinary, TrinaryGrid};
 use crate::error::{Error, Location, ParseError, Result};
-use crate::file::{write_atomic, OutputSet};
+use crate::file::{read_bytes_at_most, write_atomic, OutputSet};
 
 const YAML_FORMAT: &str = "ROS map YAML";
 const PGM_FORMAT: &str = "PGM image";
+/// The largest map YAML read (a real one is a few hundred bytes).
+const MAX_YAML_BYTES: u64 = 1 << 20;
 
 /// The YAML file beside a PGM image: the same path with the extension `yaml`.
 pub fn yaml_path_for(pgm: &Path) -> PathBuf {
@@ -307,7 +309,7 @@ pub fn read_ros_map(yaml_path: impl AsRef<Path>) -> Result<TrinaryGrid> {
         format: YAML_FORMAT,
         source,
     };
-    let bytes = std::fs::read(yaml_path).map_err(|e| Error::io(yaml_path, e))?;
+    let bytes = read_bytes_at_most(yaml_path, MAX_YAML_BYTES, YAML_FORMAT)?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|e| yaml_err(ParseError::Malformed(format!("not UTF-8 text: {e}"))))?;
     let h = parse_header(text).map_err(yaml_err)?;
@@ -327,7 +329,9 @@ pub fn read_ros_map(yaml_path: impl AsRef<Path>) -> Result<TrinaryGrid> {
         Some(dir) if Path::new(&image).is_relative() => dir.join(&image),
         _ => PathBuf::from(&image),
     };
-    let data = std::fs::read(&image_path).map_err(|e| Error::io(&image_path, e))?;
+    // The largest image read: MAX_CELLS pixels and a generous header.
+    let max_image = super::grid::MAX_CELLS as u64 + MAX_YAML_BYTES;
+    let data = read_bytes_at_most(&image_path, max_image, PGM_FORMAT)?;
     let pgm = parse_pgm(&data).map_err(|source| Error::Read {
         path: image_path.clone(),
         format: PGM_FORMAT,

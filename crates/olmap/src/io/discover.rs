@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use super::CloudFormat;
 use crate::error::{Error, Result};
+use crate::file::text::for_each_line;
 
 /// Whether `p` is a file whose extension olmap reads as a point cloud (`.bz2` included).
 pub fn is_cloud_file(p: &Path) -> bool {
@@ -44,15 +45,16 @@ pub fn scan_files(paths: &[PathBuf], list: Option<&Path>) -> Result<Vec<PathBuf>
         }
     }
     if let Some(list) = list {
-        let text = std::fs::read_to_string(list).map_err(|e| Error::io(list, e))?;
         let base = list.parent().unwrap_or(Path::new("."));
-        for line in text
-            .lines()
-            .map(str::trim)
-            .filter(|l| !l.is_empty() && !l.starts_with('#'))
-        {
-            out.push(base.join(line));
-        }
+        crate::file::parse_file(list, "scan list", |r| {
+            for_each_line(r, |_, line| {
+                let line = line.trim();
+                if !line.is_empty() && !line.starts_with('#') {
+                    out.push(base.join(line));
+                }
+                Ok(())
+            })
+        })?;
     }
     if out.is_empty() {
         return Err(Error::EmptyInput {

@@ -33,7 +33,6 @@ pub mod slam6d;
 pub mod uos;
 pub mod xyz;
 
-use std::fs::File;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
@@ -144,6 +143,35 @@ pub struct ReadOptions {
     /// echoes and the max-range sentinel; see the data README §1.3). Off by default: the file
     /// is read as it is.
     pub uos_valid_only: bool,
+    /// Compressed (`.bz2`) files only: the most bytes the file may decompress to. `None`
+    /// (the default) applies [`max_decompressed_bytes`]: [`DECOMPRESSION_RATIO`] times the
+    /// compressed size, at least [`DECOMPRESSED_FLOOR_BYTES`]. A file that decompresses to
+    /// more is refused with [`Error::TooLarge`] as soon as the limit is passed, so a small
+    /// "decompression bomb" costs neither the memory nor the time it asks for.
+    pub max_decompressed_bytes: Option<u64>,
+}
+
+/// The least a compressed file may always decompress to, whatever its size: 32 MiB (about
+/// a second of parsing; the largest scans in the shared data are 2-3 MB of text).
+pub const DECOMPRESSED_FLOOR_BYTES: u64 = 32 << 20;
+
+/// How many times its own size a compressed file may decompress to: 64. Real point clouds
+/// compress 2-10 times with bzip2 (the OctoMap `scan.dat.bz2`: 2.9 times); a file of
+/// zeros compresses more than a million times.
+pub const DECOMPRESSION_RATIO: u64 = 64;
+
+/// The default limit on what a compressed file of `compressed` bytes may decompress to:
+/// `max(DECOMPRESSION_RATIO × compressed, DECOMPRESSED_FLOOR_BYTES)`.
+///
+/// ```
+/// use olmap::io::{max_decompressed_bytes, DECOMPRESSED_FLOOR_BYTES};
+/// assert_eq!(max_decompressed_bytes(1426), DECOMPRESSED_FLOOR_BYTES);
+/// assert_eq!(max_decompressed_bytes(819_611), 64 * 819_611);
+/// ```
+pub fn max_decompressed_bytes(compressed: u64) -> u64 {
+    compressed
+        .saturating_mul(DECOMPRESSION_RATIO)
+        .max(DECOMPRESSED_FLOOR_BYTES)
 }
 
 /// What a reader found in a file besides the points.
@@ -254,55 +282,152 @@ pub fn read_cloud_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
     } else {
         path.to_path_buf()
     };
-    let read_err = |format: CloudFormat, source: ParseError| Error::Read {
-        path: path.to_path_buf(),
-        format: format.name(),
-        source,
-    };
     let mut loaded = match compression {
         None => {
             let format = match options.format {
                 Some(f) => f,
                 None => detect_format(&inner_name, &mut reader, path)?,
             };
-            read_cloud_from(reader, format, options).map_err(|e| read_err(format, e))?
+            read_cloud_from(reader, format, options)
+                .map_err(|e| Error::read(path, format.name(), e))?
         }
-        Some(_) => decompress_and_read(reader, &inner_name, path, options)?,
+        Some(_) => {
+            let compressed = reader.get_ref().metadata().map_or(0, |m| m.len());
+            let limit = options
+                .max_decompressed_bytes
+                .unwrap_or_else(|| max_decompressed_bytes(compressed));
+            let mut inner = decompress(reader, path, limit)?;
+            let format = match options.format {
+                Some(f) => f,
+                None => detect_format(&inner_name, &mut inner, path)?,
+            };
+            read_cloud_from(inner, format, options)
+                .map_err(|e| Error::read(path, format.name(), decompression_limit(e, compressed)))?
+        }
     };
     loaded.report.compression = compression;
     Ok(loaded)
 }
 
+/// The decompressed stream of a bzip2 file, refusing to produce more than `limit` bytes.
 #[cfg(feature = "bzip2")]
-fn decompress_and_read(
-    reader: BufReader<File>,
-    inner_name: &Path,
-    path: &Path,
-    options: &ReadOptions,
-) -> Result<LoadedCloud> {
-    let mut inner = BufReader::with_capacity(1 << 18, bzip2::read::MultiBzDecoder::new(reader));
-    let format = match options.format {
-        Some(f) => f,
-        None => detect_format(inner_name, &mut inner, path)?,
-    };
-    read_cloud_from(inner, format, options).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        format: format.name(),
-        source,
-    })
+fn decompress<R: BufRead>(reader: R, _path: &Path, limit: u64) -> Result<impl BufRead> {
+    Ok(bzip2_capped(reader, limit))
+}
+
+/// A bzip2 decoder over `reader` producing at most `limit` bytes, buffered.
+#[cfg(feature = "bzip2")]
+fn bzip2_capped<R: BufRead>(reader: R, limit: u64) -> impl BufRead {
+    BufReader::with_capacity(
+        1 << 18,
+        CappedReader {
+            inner: bzip2::bufread::MultiBzDecoder::new(reader),
+            produced: 0,
+            limit,
+        },
+    )
 }
 
 #[cfg(not(feature = "bzip2"))]
-fn decompress_and_read(
-    _reader: BufReader<File>,
-    _inner_name: &Path,
+fn decompress<R: BufRead>(
+    _reader: R,
     path: &Path,
-    _options: &ReadOptions,
-) -> Result<LoadedCloud> {
+    _limit: u64,
+) -> Result<BufReader<CappedReader<std::io::Empty>>> {
     Err(Error::UnknownFormat {
         path: path.to_path_buf(),
         reason: "bzip2-compressed, but olmap was built without the `bzip2` feature".into(),
     })
+}
+
+/// Reads a compressed cloud of a known format from a stream, with the same limit on the
+/// decompressed bytes as [`read_cloud_with`] (the stream's compressed size is taken to be
+/// `compressed`; see [`max_decompressed_bytes`]). Errors carry no path.
+#[cfg(feature = "bzip2")]
+pub fn read_bzip2_cloud_from<R: BufRead>(
+    reader: R,
+    compressed: u64,
+    format: CloudFormat,
+    options: &ReadOptions,
+) -> Result<LoadedCloud, ParseError> {
+    let limit = options
+        .max_decompressed_bytes
+        .unwrap_or_else(|| max_decompressed_bytes(compressed));
+    let inner = bzip2_capped(reader, limit);
+    let mut loaded =
+        read_cloud_from(inner, format, options).map_err(|e| decompression_limit(e, compressed))?;
+    loaded.report.compression = Some("bzip2");
+    Ok(loaded)
+}
+
+/// A reader that refuses to produce more than `limit` bytes: past it, a read fails with
+/// [`DecompressionLimit`] (the stream's end exactly at the limit is fine).
+struct CappedReader<R> {
+    inner: R,
+    produced: u64,
+    limit: u64,
+}
+
+/// The error a [`CappedReader`] fails with.
+#[derive(Debug)]
+struct DecompressionLimit {
+    limit: u64,
+}
+
+impl std::fmt::Display for DecompressionLimit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "decompresses to more than {} bytes", self.limit)
+    }
+}
+
+impl std::error::Error for DecompressionLimit {}
+
+impl<R: std::io::Read> std::io::Read for CappedReader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if buf.is_empty() {
+            return Ok(0);
+        }
+        if self.produced >= self.limit {
+            // One byte more than the limit is too many; the end of the stream is not.
+            let mut probe = [0u8; 1];
+            return match self.inner.read(&mut probe)? {
+                0 => Ok(0),
+                _ => Err(std::io::Error::other(DecompressionLimit {
+                    limit: self.limit,
+                })),
+            };
+        }
+        let room = (self.limit - self.produced).min(buf.len() as u64) as usize;
+        let n = self.inner.read(&mut buf[..room])?;
+        self.produced += n as u64;
+        Ok(n)
+    }
+}
+
+/// Turns a parser's read failure caused by a [`CappedReader`] into [`ParseError::TooLarge`]
+/// (other errors pass through).
+fn decompression_limit(e: ParseError, compressed: u64) -> ParseError {
+    let limit = match &e {
+        ParseError::Io(io) => io
+            .get_ref()
+            .and_then(|inner| inner.downcast_ref::<DecompressionLimit>())
+            .map(|d| d.limit),
+        _ => None,
+    };
+    match limit {
+        Some(limit) => ParseError::TooLarge {
+            what: format!(
+                "the bzip2 data ({compressed} bytes compressed) decompresses to more than {limit} \
+                 bytes"
+            ),
+            limit: format!(
+                "{limit} bytes decompressed: {DECOMPRESSION_RATIO} times the compressed size, at \
+                 least {} MiB, unless ReadOptions::max_decompressed_bytes says otherwise",
+                DECOMPRESSED_FLOOR_BYTES >> 20
+            ),
+        },
+        None => e,
+    }
 }
 
 /// Reads a cloud of a known format from a stream (no file name needed).

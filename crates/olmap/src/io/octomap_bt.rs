@@ -59,6 +59,12 @@ const MAGIC: &[u8] = b"# Octomap OcTree binary file";
 /// The start of the first line of a full-probability `.ot` file.
 const OT_MAGIC: &[u8] = b"# Octomap OcTree file";
 
+/// Bytes of memory one expanded voxel takes in a map read by
+/// [`crate::occupancy::read_map`] (in its table, with the spare slots; [`read()`]'s sorted
+/// list takes twice that while it is built). Used to state what a refused tree would
+/// have cost.
+pub const BYTES_PER_EXPANDED_VOXEL: u64 = 10;
+
 /// The longest header line accepted (a guard against reading a binary file as one line).
 const MAX_HEADER_LINE: u64 = 64 * 1024;
 
@@ -121,7 +127,8 @@ impl Leaf {
 /// The body must hold exactly the tree: as many nodes as the header's `size`, and no bytes
 /// after it. `max_voxels` bounds the number of occupied voxels after expansion (an occupied
 /// leaf at depth `d` is `8^(16-d)` voxels); a tree above it is refused with
-/// [`ParseError::Unsupported`] before anything is expanded.
+/// [`ParseError::TooLarge`], which names the expansion and its memory estimate, before
+/// anything is expanded.
 ///
 /// Errors: [`ParseError::Empty`] for an empty stream; header problems at their line; body
 /// problems at their byte offset (counted from the start of the stream);
@@ -138,41 +145,103 @@ impl Leaf {
 /// assert_eq!(tree.occupied, vec![VoxelKey::new(3, -2, 0)]);
 /// ```
 pub fn read<R: BufRead>(reader: R, max_voxels: usize) -> Result<BtTree, ParseError> {
-    let (header, stats, leaves) = parse(reader)?;
-    let total = leaves.iter().fold(0u64, |sum, l| {
-        sum.saturating_add(1u64 << (3 * (TREE_DEPTH - l.depth)))
-    });
-    if total > max_voxels as u64 {
-        return Err(ParseError::Unsupported(format!(
-            "the {} occupied leaves expand to {total} voxels of {} m, more than the limit of \
-             {max_voxels}",
-            stats.occupied_leaves, header.resolution
-        )));
-    }
+    let leaves = read_leaves(reader)?;
+    let total = leaves.expanded_voxels_within(max_voxels)?;
     // `total` <= `max_voxels`, so it fits a usize. The voxels are gathered as packed
     // OctoMap keys (x, y, z in 16 bits each, x most significant), whose order as integers
     // is the (x, y, z) order of the voxel keys, and sort faster than the keys themselves.
     let mut packed = Vec::with_capacity(total as usize);
-    for leaf in &leaves {
-        let (corner, edge) = leaf.corner_and_edge();
-        for x in corner[0]..corner[0] + edge {
-            for y in corner[1]..corner[1] + edge {
-                let xy = u64::from(x) << 32 | u64::from(y) << 16;
-                packed.extend((corner[2]..corner[2] + edge).map(|z| xy | u64::from(z)));
+    leaves.for_each_packed(|p| packed.push(p));
+    // Leaves are disjoint cubes, so there are no duplicates to remove.
+    packed.sort_unstable();
+    let occupied = packed.into_iter().map(unpack).collect();
+    Ok(BtTree {
+        resolution: leaves.resolution,
+        occupied,
+        stats: leaves.stats,
+    })
+}
+
+/// The voxel key of a packed OctoMap key (x, y, z in 16 bits each, x most significant).
+#[inline]
+fn unpack(p: u64) -> VoxelKey {
+    let axis = |shift: u32| (p >> shift & 0xFFFF) as i32 - KEY_OFFSET;
+    VoxelKey::new(axis(32), axis(16), axis(0))
+}
+
+/// A `.bt` tree parsed but not expanded: its resolution, what it holds, and its occupied
+/// leaves (at any depth). [`BtLeaves::expanded_voxels_within`] says what expanding them
+/// would cost before anything is allocated; [`BtLeaves::for_each_voxel`] expands them.
+#[derive(Debug, Clone)]
+pub struct BtLeaves {
+    /// The edge of the finest voxels (depth-16 leaves), metres.
+    pub resolution: f64,
+    /// What the file's tree holds.
+    pub stats: BtStats,
+    leaves: Vec<Leaf>,
+}
+
+impl BtLeaves {
+    /// The voxels the occupied leaves expand to (an occupied leaf at depth `d` is
+    /// `8^(16-d)` voxels).
+    pub fn expanded_voxels(&self) -> u64 {
+        self.leaves.iter().fold(0u64, |sum, l| {
+            sum.saturating_add(1u64 << (3 * (TREE_DEPTH - l.depth)))
+        })
+    }
+
+    /// [`BtLeaves::expanded_voxels`], or [`ParseError::TooLarge`] naming the expansion
+    /// and its memory estimate when it is above `max_voxels`.
+    pub fn expanded_voxels_within(&self, max_voxels: usize) -> Result<u64, ParseError> {
+        let total = self.expanded_voxels();
+        if total <= max_voxels as u64 {
+            return Ok(total);
+        }
+        let coarse: u64 = self.stats.occupied_leaves_by_depth[..TREE_DEPTH as usize]
+            .iter()
+            .sum();
+        Err(ParseError::TooLarge {
+            what: format!(
+                "the {} occupied leaves ({coarse} of them coarser than one voxel) expand to \
+                 {total} voxels of {} m, about {} MiB as a map",
+                self.stats.occupied_leaves,
+                self.resolution,
+                total.saturating_mul(BYTES_PER_EXPANDED_VOXEL) >> 20
+            ),
+            limit: format!("{max_voxels} voxels"),
+        })
+    }
+
+    /// Calls `f` with every occupied voxel, leaf by leaf in the file's order (each leaf's
+    /// voxels in (x, y, z) order). Check the cost first
+    /// ([`BtLeaves::expanded_voxels_within`]).
+    pub fn for_each_voxel(&self, mut f: impl FnMut(VoxelKey)) {
+        self.for_each_packed(|p| f(unpack(p)));
+    }
+
+    fn for_each_packed(&self, mut f: impl FnMut(u64)) {
+        for leaf in &self.leaves {
+            let (corner, edge) = leaf.corner_and_edge();
+            for x in corner[0]..corner[0] + edge {
+                for y in corner[1]..corner[1] + edge {
+                    let xy = u64::from(x) << 32 | u64::from(y) << 16;
+                    for z in corner[2]..corner[2] + edge {
+                        f(xy | u64::from(z));
+                    }
+                }
             }
         }
     }
-    // Leaves are disjoint cubes, so there are no duplicates to remove.
-    packed.sort_unstable();
-    let unpack = |p: u64, shift: u32| (p >> shift & 0xFFFF) as i32 - KEY_OFFSET;
-    let occupied = packed
-        .into_iter()
-        .map(|p| VoxelKey::new(unpack(p, 32), unpack(p, 16), unpack(p, 0)))
-        .collect();
-    Ok(BtTree {
+}
+
+/// Reads a `.bt` OctoMap tree from a stream without expanding it: memory in proportion to
+/// the file, whatever its leaves stand for. Errors as for [`read()`], but for the limit.
+pub fn read_leaves<R: BufRead>(reader: R) -> Result<BtLeaves, ParseError> {
+    let (header, stats, leaves) = parse(reader)?;
+    Ok(BtLeaves {
         resolution: header.resolution,
-        occupied,
         stats,
+        leaves,
     })
 }
 
@@ -935,13 +1004,13 @@ mod tests {
         assert_eq!(tree.stats.occupied_leaves_by_depth[14], 1);
         assert!(matches!(
             read(&bytes[..], 63),
-            Err(ParseError::Unsupported(m)) if m.contains("64 voxels")
+            Err(ParseError::TooLarge { what, .. }) if what.contains("64 voxels")
         ));
         // An occupied depth-1 leaf would be 8^15 voxels: refused, nothing allocated.
         let huge = file(&header(2), &[0x02, 0x00]);
         assert!(matches!(
             read(&huge[..], LIMIT),
-            Err(ParseError::Unsupported(m)) if m.contains("35184372088832 voxels")
+            Err(ParseError::TooLarge { what, .. }) if what.contains("35184372088832 voxels")
         ));
     }
 

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::{read_cloud_with, write_cloud, ReadOptions, ReadReport, WriteOptions};
 use crate::cloud::{BoxReport, CloudStats, RangeReport};
 use crate::geometry::{Aabb, Pose};
-use crate::Result;
+use crate::{Error, Result};
 
 /// Width and height of an organised cloud.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -156,10 +156,87 @@ pub struct ConvertReport {
     pub seconds: f64,
 }
 
-/// Reads, filters and writes a cloud as `job` says; `start` is when the command began
-/// (the report's `seconds` count from it). An output that cannot be written is refused
-/// before the input is read.
+impl ConvertJob {
+    /// Checks the filters before anything is read ([`Error::InvalidArgument`] naming the
+    /// filter): ranges finite (an unset maximum is infinite) and `>= 0`, heights not NaN,
+    /// the box finite, the voxel edge finite and `> 0`, and no filter inverted (`min_range`
+    /// above `max_range`, `z_min` above `z_max`, a box whose minimum corner is above its
+    /// maximum on some axis): an inverted filter keeps nothing, and writing an empty cloud
+    /// for it would hide the mistake.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |what: String| Err(Error::InvalidArgument(what));
+        for (name, v) in [("min_range", self.min_range), ("max_range", self.max_range)] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v >= 0.0) {
+                    return bad(format!(
+                        "{name} must be a finite number of metres >= 0, got {v}"
+                    ));
+                }
+            }
+        }
+        if let (Some(lo), Some(hi)) = (self.min_range, self.max_range) {
+            if lo > hi {
+                return bad(format!(
+                    "min_range ({lo} m) is above max_range ({hi} m): no point could pass"
+                ));
+            }
+        }
+        for (name, v) in [("z_min", self.z_min), ("z_max", self.z_max)] {
+            if v.is_some_and(f64::is_nan) {
+                return bad(format!("{name} must be a number of metres, got NaN"));
+            }
+        }
+        if let (Some(lo), Some(hi)) = (self.z_min, self.z_max) {
+            if lo > hi {
+                return bad(format!(
+                    "z_min ({lo} m) is above z_max ({hi} m): no point could pass"
+                ));
+            }
+        }
+        if let Some(b) = &self.crop {
+            if !b.min.iter().chain(b.max.iter()).all(|v| v.is_finite()) {
+                return bad(format!(
+                    "the box must be finite, got {:?} .. {:?}",
+                    b.min, b.max
+                ));
+            }
+            if let Some(i) = (0..3).find(|&i| b.min[i] > b.max[i]) {
+                let axis = ["x", "y", "z"][i];
+                return bad(format!(
+                    "the box is inverted: {axis} min {} is above {axis} max {}: no point \
+                     could pass",
+                    b.min[i], b.max[i]
+                ));
+            }
+        }
+        if let Some(v) = self.voxel {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!(
+                    "the voxel edge must be a finite number of metres > 0, got {v}"
+                ));
+            }
+        }
+        if let Some(t) = &self.transform {
+            let iso = t.isometry();
+            if !iso
+                .translation
+                .vector
+                .iter()
+                .chain(iso.rotation.coords.iter())
+                .all(|v| v.is_finite())
+            {
+                return bad("the transform must be finite".into());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Reads, filters and writes a cloud as `job` says ([`ConvertJob::validate`] first);
+/// `start` is when the command began (the report's `seconds` count from it). An output
+/// that cannot be written is refused before the input is read.
 pub fn convert_cloud_file(job: &ConvertJob, start: Instant) -> Result<ConvertReport> {
+    job.validate()?;
     crate::file::check_output(&job.output, "point cloud")?;
     let loaded = read_cloud_with(&job.input, &job.read)?;
     let read_points = loaded.cloud.len();

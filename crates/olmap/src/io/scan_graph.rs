@@ -20,7 +20,7 @@ use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 use super::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 use crate::cloud::PointCloud;
 use crate::error::{Location, ParseError};
-use crate::file::cursor::ByteCursor;
+use crate::file::cursor::StreamCursor;
 use crate::geometry::Pose;
 
 /// One node of a ScanGraph: a scan in its sensor frame and the sensor's pose.
@@ -40,9 +40,9 @@ trait GraphValues {
     fn pose(&mut self) -> Result<Pose, ParseError>;
 }
 
-impl GraphValues for ByteCursor<'_> {
+impl<R: BufRead> GraphValues for StreamCursor<R> {
     fn tagged(&mut self, tag: u32, n: usize, what: &str) -> Result<[f64; 4], ParseError> {
-        let at = self.pos() as u64;
+        let at = self.pos();
         let t = self.u32(what)?;
         if t != tag {
             return Err(ParseError::at(
@@ -57,7 +57,7 @@ impl GraphValues for ByteCursor<'_> {
         Ok(v)
     }
     fn pose(&mut self) -> Result<Pose, ParseError> {
-        let at = self.pos() as u64;
+        let at = self.pos();
         let t = self.tagged(3, 3, "pose translation")?;
         let q = self.tagged(4, 4, "pose quaternion")?;
         let quat = Quaternion::new(q[0], q[1], q[2], q[3]);
@@ -75,30 +75,33 @@ impl GraphValues for ByteCursor<'_> {
     }
 }
 
-/// Reads every node of a ScanGraph, scans in their sensor frames.
-pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadReport), ParseError> {
-    let mut data = Vec::new();
-    reader.read_to_end(&mut data)?;
-    if data.is_empty() {
+/// Points reserved up front per node at most; beyond that the vector grows as points
+/// arrive, so a count claimed by the file allocates nothing that is not there.
+const INITIAL_POINTS: u32 = 1 << 16;
+
+/// Reads every node of a ScanGraph, scans in their sensor frames. The stream is read as it
+/// comes, never whole; memory grows only with the points actually read.
+pub fn read_nodes<R: BufRead>(reader: R) -> Result<(Vec<ScanNode>, ReadReport), ParseError> {
+    let mut c = StreamCursor::new(reader);
+    if c.at_end()? {
         return Err(ParseError::Empty);
     }
     let mut report = ReadReport::new(CloudFormat::ScanGraph);
     report.fields = vec!["x".into(), "y".into(), "z".into()];
-    let mut c = ByteCursor::new(&data);
     let n_nodes = c.u32("node count")?;
     let mut nodes = Vec::new();
     for node in 0..n_nodes {
-        let n_points = c.u32("point count")? as usize;
-        // 28 bytes per point: refuse counts the file cannot hold before allocating.
-        if n_points.saturating_mul(28) > c.remaining() {
-            return Err(ParseError::Truncated(format!(
-                "node {node} announces {n_points} points but only {} bytes are left",
-                c.remaining()
-            )));
-        }
-        let mut points = Vec::with_capacity(n_points);
-        for _ in 0..n_points {
-            let v = c.tagged(3, 3, "point")?;
+        let at = c.pos();
+        let n_points = c.u32("point count")?;
+        let mut points = Vec::with_capacity(n_points.min(INITIAL_POINTS) as usize);
+        for i in 0..n_points {
+            let v = c.tagged(3, 3, "point").map_err(|e| match e {
+                ParseError::Truncated(m) => ParseError::Truncated(format!(
+                    "node {node} announces {n_points} points (count at byte {at}), the file \
+                     ends in point {i}: {m}"
+                )),
+                e => e,
+            })?;
             report.records += 1;
             if let Some(p) = finite_point([v[0], v[1], v[2]], &mut report) {
                 points.push(p);
@@ -112,13 +115,7 @@ pub fn read_nodes<R: BufRead>(mut reader: R) -> Result<(Vec<ScanNode>, ReadRepor
             cloud: PointCloud::from_points(points),
         });
     }
-    let n_edges = c.u32("edge count")? as usize;
-    // 4 + 4 + 60 (pose) + 8 bytes per edge.
-    if n_edges.saturating_mul(76) > c.remaining() {
-        return Err(ParseError::Truncated(format!(
-            "{n_edges} edges announced, not enough bytes left"
-        )));
-    }
+    let n_edges = c.u32("edge count")?;
     for _ in 0..n_edges {
         c.u32("edge first id")?;
         c.u32("edge second id")?;

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use super::input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 use super::{build_map, MapBuild, MapParams, MapReport};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::file::{html_path_beside, write_atomic, OutputSet};
 use crate::geometry::PoseList;
 use crate::io::ReadOptions;
@@ -81,9 +81,17 @@ fn declare_outputs(job: &MapJob) -> Result<OutputSet> {
 /// scan at fault.
 pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     MapFormat::of_output(&job.output)?;
+    job.params.validate()?;
+    check_unique_names(&job.scans)?;
     let mut set = declare_outputs(job)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
+    // Every point must have a voxel key at the map's resolution: an error naming the scan
+    // and the point, not one deep in the mapper (or a point lost).
+    let keys = occupancy::OccupancyList::new(job.params.register.search.resolution)?;
+    for s in &scans {
+        keys.check_keys(&s.cloud, &crate::geometry::Pose::identity(), &s.name)?;
+    }
     let mut params = job.params.clone();
     if let Some(name) = &job.first {
         params.first = scan_index(&scans, name)?;
@@ -131,4 +139,25 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
         report,
         poses,
     })
+}
+
+/// Scans are named by their file stems ([`crate::io::file_stem_name`]) in the poses, the
+/// scan maps and the reports: two files of one name (the same scan folder given twice, two
+/// robots' `scan002`) would be written under one name, one over the other. Refused,
+/// naming both files.
+fn check_unique_names(scans: &[PathBuf]) -> Result<()> {
+    let mut seen: std::collections::HashMap<String, &PathBuf> = std::collections::HashMap::new();
+    for p in scans {
+        if let Some(first) = seen.insert(crate::io::file_stem_name(p), p) {
+            return Err(Error::InvalidArgument(format!(
+                "two scans are named {}: {} and {}; scan names (file stems) must be unique, \
+                 as the poses and scan maps are written by name (map each folder on its own, \
+                 or rename the files)",
+                crate::io::file_stem_name(p),
+                first.display(),
+                p.display()
+            )));
+        }
+    }
+    Ok(())
 }

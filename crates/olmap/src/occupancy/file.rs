@@ -1,9 +1,10 @@
 //! Map files: reading and writing occupancy lists by file name.
 
+use std::io::BufRead;
 use std::path::Path;
 
 use super::list::OccupancyList;
-use crate::error::{Error, Result};
+use crate::error::{Error, ParseError, Result};
 use crate::io::octomap_bt::{self, BtStats};
 
 /// The map file formats olmap knows.
@@ -58,9 +59,15 @@ pub struct LoadedMap {
     pub bt: Option<BtStats>,
 }
 
-/// The most voxels a `.bt` file may expand to when read (8 bytes each in a `Vec` while
-/// reading, 10-15 bytes in the map): 100 million.
-pub const MAX_BT_VOXELS: usize = 100_000_000;
+/// The most voxels a `.bt` file may expand to when read: 2^24 = 16,777,216, one occupied
+/// leaf at depth 8 (a cube of 256 voxels a side), about 170 MiB in the map
+/// ([`octomap_bt::BYTES_PER_EXPANDED_VOXEL`] each). OctoMap prunes a node whose eight
+/// children are all occupied into one coarse leaf, so a small file can stand for many
+/// voxels: 5 leaves at depth 8 in a 76-byte file are 84 million. Real maps stay far below
+/// the limit (the shared data's `geb079.bt`: 185,673 voxels from 143,729 leaves); a tree
+/// beyond it is refused with [`Error::TooLarge`] naming the expansion before anything is
+/// allocated.
+pub const MAX_BT_VOXELS: usize = 1 << 24;
 
 fn unknown(path: &Path) -> Error {
     Error::UnknownFormat {
@@ -73,19 +80,31 @@ fn unknown(path: &Path) -> Error {
 pub fn read_map(path: impl AsRef<Path>) -> Result<LoadedMap> {
     let path = path.as_ref();
     let format = MapFormat::from_path(path).ok_or_else(|| unknown(path))?;
+    crate::file::parse_file(path, format.name(), |r| read_map_from(r, format))
+}
+
+/// Reads a map of a known format from a stream (no file name needed): what [`read_map`]
+/// does once it has opened the file. A `.bt` tree is expanded to at most
+/// [`MAX_BT_VOXELS`] voxels.
+pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedMap, ParseError> {
     match format {
         MapFormat::Olm => Ok(LoadedMap {
-            map: OccupancyList::read_olm_path(path)?,
+            map: OccupancyList::read_olm(reader)?,
             format,
             bt: None,
         }),
         MapFormat::OctomapBt => {
-            let tree = octomap_bt::read_path(path, MAX_BT_VOXELS)?;
-            let mut map = OccupancyList::with_capacity(tree.resolution, tree.occupied.len())?;
-            for k in &tree.occupied {
-                map.set(*k, 1)
-                    .expect("OctoMap keys are within olmap's range");
-            }
+            // Expanded straight into the map (no sorted copy): 10 bytes a voxel.
+            let tree = octomap_bt::read_leaves(reader)?;
+            let total = tree.expanded_voxels_within(MAX_BT_VOXELS)?;
+            let mut map =
+                OccupancyList::with_capacity(tree.resolution, total as usize).map_err(|e| {
+                    ParseError::Malformed(e.to_string().replace("invalid argument: ", ""))
+                })?;
+            tree.for_each_voxel(|k| {
+                map.set(k, 1)
+                    .expect("OctoMap keys are within olmap's range")
+            });
             Ok(LoadedMap {
                 map,
                 format,

@@ -110,12 +110,47 @@ impl OccupancyList {
         })
     }
 
-    /// Endpoints only: every point adds 1 to the count of its voxel (no ray tracing).
-    /// Points whose key is outside the representable range are skipped.
+    /// Endpoints only: every point adds 1 to the count of its voxel (no ray tracing). A
+    /// point whose key is outside the representable range is an error naming it
+    /// ([`OccupancyList::check_keys`]), never a silent drop.
     pub fn from_cloud(cloud: &PointCloud, resolution: f64) -> Result<Self> {
         let mut list = Self::with_capacity(resolution, cloud.len() / 4)?;
+        list.check_keys(cloud, &Pose::identity(), "the cloud")?;
         list.add_points(cloud, &Pose::identity(), 1);
         Ok(list)
+    }
+
+    /// Checks that every point of `cloud` placed by `t_map_cloud` has a voxel key in the
+    /// representable range ([`super::KEY_MIN`] to [`super::KEY_MAX`] per axis, ±13 km at
+    /// 0.1 m, ±1.3 m at 10 µm): the first that does not (or is not finite) is
+    /// [`Error::TooLarge`] naming `what`, the point's index, its coordinates in the map
+    /// frame, its key and the range ([`crate::geometry::key_range_error`]).
+    ///
+    /// ```
+    /// use olmap::cloud::PointCloud;
+    /// use olmap::geometry::Pose;
+    /// use olmap::occupancy::OccupancyList;
+    /// use nalgebra::Point3;
+    /// let cloud = PointCloud::from_points(vec![Point3::new(1.0, 0.0, 0.0), Point3::new(3.0, 0.0, 0.0)]);
+    /// let map = OccupancyList::new(1e-5).unwrap(); // keys within ±1.31 m
+    /// let e = map.check_keys(&cloud, &Pose::identity(), "scan.pcd").unwrap_err().to_string();
+    /// assert!(e.contains("scan.pcd: point 1 at (3, 0, 0) m"), "{e}");
+    /// ```
+    pub fn check_keys(&self, cloud: &PointCloud, t_map_cloud: &Pose, what: &str) -> Result<()> {
+        for (i, p) in cloud.points().iter().enumerate() {
+            // The arithmetic of `add_points`: a cloud that passes loses no point there.
+            let q = t_map_cloud.transform_point(&p.cast::<f64>());
+            if self.pack(&q).is_none() {
+                return Err(crate::geometry::key_range_error(
+                    what,
+                    i,
+                    &q,
+                    self.resolution,
+                    super::packed::KEY_MAX as i64,
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Adds `increment` to the voxel of every point of `cloud` mapped by `t_map_cloud`
@@ -147,6 +182,20 @@ impl OccupancyList {
     #[inline]
     pub(crate) fn sub_packed(&mut self, key: u64, decrement: u16) {
         self.table.update(key, |c| c.saturating_sub(decrement));
+    }
+
+    /// Lowers every count above `max_count` (at least 1) to it.
+    pub fn clamp_counts(&mut self, max_count: u16) {
+        let max = max_count.max(1);
+        let over: Vec<u64> = self
+            .table
+            .entries()
+            .filter(|&e| entry_count(e) > max)
+            .map(entry_key)
+            .collect();
+        for k in over {
+            self.table.update(k, |_| max);
+        }
     }
 
     /// Voxel edge, metres.

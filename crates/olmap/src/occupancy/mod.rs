@@ -29,7 +29,7 @@ mod table;
 mod voxelize;
 
 pub use buckets::PositionBuckets;
-pub use file::{read_map, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
+pub use file::{read_map, read_map_from, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
 pub use list::{OccupancyList, OccupancyStats};
 pub use olm::{OLM_MAGIC, OLM_VERSION};
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};

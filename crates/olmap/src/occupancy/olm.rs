@@ -36,8 +36,8 @@ use super::list::{check_resolution, OccupancyList};
 use super::packed::{entry_count, entry_key, MAX_COUNT};
 use super::table::VoxelTable;
 use crate::error::{Location, ParseError, Result};
-use crate::file::crc32::crc32;
-use crate::file::cursor::ByteCursor;
+use crate::file::crc32::{crc32, Crc32};
+use crate::file::cursor::StreamCursor;
 
 /// The 8 bytes every `.olm` file starts with.
 pub const OLM_MAGIC: &[u8; 8] = b"OLMAP\0\r\n";
@@ -58,17 +58,78 @@ fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
+/// Keys reserved up front at most (512 KiB); beyond that the vector grows as keys arrive.
+const INITIAL_KEYS: u64 = 1 << 16;
+
+/// Where varints come from: the file's stream, or a chunk's payload read whole. Byte
+/// offsets are the file's.
+trait Varints {
+    /// The file offset of the next byte.
+    fn offset(&self) -> u64;
+    /// The next LEB128 varint (at most 10 bytes).
+    fn varint(&mut self, what: &str) -> Result<u64, ParseError>;
+}
+
+impl<R: BufRead> Varints for StreamCursor<R> {
+    fn offset(&self) -> u64 {
+        self.pos()
+    }
+    fn varint(&mut self, what: &str) -> Result<u64, ParseError> {
+        StreamCursor::varint(self, what)
+    }
+}
+
+/// A chunk's payload, read whole, whose first byte is byte `base` of the file.
+struct Payload<'a> {
+    data: &'a [u8],
+    pos: usize,
+    base: u64,
+}
+
+impl Payload<'_> {
+    fn remaining(&self) -> usize {
+        self.data.len() - self.pos
+    }
+}
+
+impl Varints for Payload<'_> {
+    fn offset(&self) -> u64 {
+        self.base + self.pos as u64
+    }
+    fn varint(&mut self, what: &str) -> Result<u64, ParseError> {
+        let start = self.offset();
+        let mut v = 0u64;
+        for k in 0..MAX_VARINT as usize {
+            let Some(&b) = self.data.get(self.pos) else {
+                return Err(ParseError::at(
+                    Location::Byte(start),
+                    format!("{what}: the chunk ends inside a varint"),
+                ));
+            };
+            self.pos += 1;
+            v |= ((b & 0x7F) as u64) << (7 * k);
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        Err(ParseError::at(
+            Location::Byte(start),
+            format!("{what}: varint longer than {MAX_VARINT} bytes"),
+        ))
+    }
+}
+
 /// Reads `n` keys as varint differences, continuing from `key`; `base` is the index of
 /// the first of them in the file (for messages).
 fn read_keys(
-    r: &mut ByteCursor<'_>,
-    n: usize,
+    r: &mut impl Varints,
+    n: u64,
     key: &mut u64,
-    base: usize,
+    base: u64,
     keys: &mut Vec<u64>,
 ) -> Result<(), ParseError> {
     for i in 0..n {
-        let at = r.pos() as u64;
+        let at = r.offset();
         let d = r.varint("key")?;
         if base + i > 0 && d == 0 {
             return Err(ParseError::at(
@@ -89,12 +150,12 @@ fn read_keys(
 
 /// Reads one count per key into `table`.
 fn read_counts(
-    r: &mut ByteCursor<'_>,
+    r: &mut impl Varints,
     keys: &[u64],
     table: &mut VoxelTable,
 ) -> Result<(), ParseError> {
     for &k in keys {
-        let at = r.pos() as u64;
+        let at = r.offset();
         let c = r.varint("count")?;
         if c == 0 || c > MAX_COUNT as u64 {
             return Err(ParseError::at(
@@ -107,49 +168,53 @@ fn read_counts(
     Ok(())
 }
 
-/// Version 1: all keys, all counts, one checksum of the whole file.
-fn read_v1(data: &[u8], r: &mut ByteCursor<'_>, n: u64) -> Result<VoxelTable, ParseError> {
-    // Two bytes per voxel at least, plus the checksum: refuse counts the file cannot hold.
-    if n.saturating_mul(2) > r.remaining() as u64 {
-        return Err(ParseError::Truncated(format!(
-            "{n} voxels announced but only {} bytes follow",
-            r.remaining()
-        )));
-    }
-    let n = n as usize;
-    let mut keys = Vec::with_capacity(n);
+/// The resolution checked, or an error at its byte (12).
+fn resolution_at_12(resolution: f64) -> Result<(), ParseError> {
+    check_resolution(resolution).map_err(|e| {
+        ParseError::at(
+            Location::Byte(12),
+            e.to_string().replace("invalid argument: ", ""),
+        )
+    })
+}
+
+/// Version 1: all keys, all counts, one checksum of the whole file. Read as it streams:
+/// memory grows with the keys actually read, whatever `n` claims.
+fn read_v1<R: BufRead>(r: &mut StreamCursor<R>, n: u64) -> Result<VoxelTable, ParseError> {
+    let mut keys = Vec::with_capacity(n.min(INITIAL_KEYS) as usize);
     read_keys(r, n, &mut 0, 0, &mut keys)?;
-    let mut table = VoxelTable::with_capacity(n);
+    // Every key was read: the table is sized by voxels that are there.
+    let mut table = VoxelTable::with_capacity(keys.len());
     read_counts(r, &keys, &mut table)?;
-    let body_end = r.pos();
+    let computed = r.crc();
     let stored = r.u32("checksum")?;
-    let computed = crc32(&data[..body_end]);
     if computed != stored {
         return Err(ParseError::Malformed(format!(
             "checksum mismatch (stored {stored:08x}, computed {computed:08x}): the file is \
              damaged somewhere (a version-1 .olm has one checksum for the whole file)"
         )));
     }
-    if r.remaining() != 0 {
+    let end = r.pos();
+    let rest = r.count_rest()?;
+    if rest != 0 {
         return Err(ParseError::Malformed(format!(
-            "{} unexpected bytes after the checksum",
-            r.remaining()
+            "{rest} unexpected bytes after the checksum (which ends at byte {end})"
         )));
     }
     Ok(table)
 }
 
 /// Version 2: the header's checksum, then chunk by chunk, each with its own checksum.
-fn read_v2<'a>(
-    data: &'a [u8],
-    r: &mut ByteCursor<'a>,
+/// Read as it streams: a chunk's payload is read (as its bytes arrive) and checked before
+/// it is decoded, and memory grows with the voxels actually read, whatever `n` claims.
+fn read_v2<R: BufRead>(
+    r: &mut StreamCursor<R>,
     n: u64,
     resolution: f64,
 ) -> Result<VoxelTable, ParseError> {
     let chunk = r.u32("chunk size")? as u64;
-    let header_end = r.pos();
+    let computed = r.crc();
     let stored = r.u32("header checksum")?;
-    let computed = crc32(&data[..header_end]);
     if computed != stored {
         return Err(ParseError::at(
             Location::Byte(0),
@@ -160,71 +225,82 @@ fn read_v2<'a>(
             ),
         ));
     }
-    check_resolution(resolution).map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
+    resolution_at_12(resolution)?;
     if chunk == 0 && n > 0 {
         return Err(ParseError::at(Location::Byte(28), "chunk size 0"));
     }
-    // Per voxel at least two bytes, per chunk eight: refuse counts the file cannot hold.
     let chunks = if n == 0 { 0 } else { n.div_ceil(chunk) };
-    let need = n.saturating_mul(2).saturating_add(chunks.saturating_mul(8));
-    if need > r.remaining() as u64 {
-        return Err(ParseError::Truncated(format!(
-            "{n} voxels in {chunks} chunks announced but only {} bytes follow",
-            r.remaining()
-        )));
-    }
-    let n = n as usize;
-    let mut keys = Vec::with_capacity((chunk as usize).min(n));
-    let mut table = VoxelTable::with_capacity(n);
+    let mut keys = Vec::with_capacity(chunk.min(n).min(INITIAL_KEYS) as usize);
+    let mut table = VoxelTable::with_capacity(n.min(INITIAL_KEYS) as usize);
+    let mut payload = Vec::new();
     let mut key = 0u64;
-    for c in 0..chunks as usize {
-        let first = c * chunk as usize;
-        let m = (chunk as usize).min(n - first);
+    for c in 0..chunks {
+        let first = c * chunk;
+        let m = chunk.min(n - first);
         let start = r.pos();
         let voxels = format!("voxels {first}..{}", first + m);
-        let len = r.u32("chunk length")? as u64;
-        let (lo, hi) = (2 * m as u64, 2 * MAX_VARINT * m as u64);
-        if len < lo || len > hi || len + 4 > r.remaining() as u64 {
-            let reason = if len + 4 > r.remaining() as u64 {
-                format!("its length {len} runs past the end of the file (cut short, or damaged)")
-            } else {
-                format!("its length {len} is impossible for {m} voxels")
-            };
-            return Err(ParseError::at(
-                Location::Byte(start as u64),
+        let damaged = |reason: String| {
+            ParseError::at(
+                Location::Byte(start),
                 format!("chunk {c} ({voxels}) is damaged: {reason}"),
-            ));
+            )
+        };
+        let cut_short = |len: u64| {
+            damaged(format!(
+                "its length {len} runs past the end of the file (cut short, or damaged)"
+            ))
+        };
+        let len_bytes = r.array::<4>("chunk length")?;
+        let len = u32::from_le_bytes(len_bytes) as u64;
+        let (lo, hi) = (2 * m, 2 * MAX_VARINT * m);
+        if len < lo || len > hi {
+            return Err(damaged(format!(
+                "its length {len} is impossible for {m} voxels"
+            )));
         }
-        let end = start + 4 + len as usize;
-        let stored = u32::from_le_bytes(data[end..end + 4].try_into().expect("4 bytes"));
-        if crc32(&data[start..end]) != stored {
+        if !r.read_vec(&mut payload, len)? {
+            return Err(cut_short(len));
+        }
+        let mut stored = [0u8; 4];
+        if !r.read_exact_or_end(&mut stored)? {
+            return Err(cut_short(len));
+        }
+        let mut crc = Crc32::default();
+        crc.update(&len_bytes);
+        crc.update(&payload);
+        if crc.finish() != u32::from_le_bytes(stored) {
             return Err(ParseError::at(
-                Location::Byte(start as u64),
+                Location::Byte(start),
                 format!(
                     "chunk {c} ({voxels}, bytes {start}..{}) is damaged: checksum mismatch",
-                    end + 4
+                    start + 4 + len + 4
                 ),
             ));
         }
-        let mut body = ByteCursor::new_at(&data[..end], start + 4);
+        let mut body = Payload {
+            data: &payload,
+            pos: 0,
+            base: start + 4,
+        };
         keys.clear();
         read_keys(&mut body, m, &mut key, first, &mut keys)?;
         read_counts(&mut body, &keys, &mut table)?;
         if body.remaining() != 0 {
             return Err(ParseError::at(
-                Location::Byte(body.pos() as u64),
+                Location::Byte(body.offset()),
                 format!(
                     "chunk {c}: {} bytes left over after its voxels",
                     body.remaining()
                 ),
             ));
         }
-        *r = ByteCursor::new_at(data, end + 4);
     }
-    if r.remaining() != 0 {
+    let end = r.pos();
+    let rest = r.count_rest()?;
+    if rest != 0 {
         return Err(ParseError::at(
-            Location::Byte(r.pos() as u64),
-            format!("{} unexpected bytes after the last chunk", r.remaining()),
+            Location::Byte(end),
+            format!("{rest} unexpected bytes after the last chunk"),
         ));
     }
     Ok(table)
@@ -263,15 +339,16 @@ impl OccupancyList {
     }
 
     /// Reads a `.olm` stream (version 2, or the older version 1). Damage is refused with
-    /// its byte offset: the damaged chunk (index, voxels, bytes) or the header.
-    pub fn read_olm<R: BufRead>(mut reader: R) -> Result<OccupancyList, ParseError> {
-        let mut data = Vec::new();
-        reader.read_to_end(&mut data)?;
-        if data.is_empty() {
+    /// its byte offset: the damaged chunk (index, voxels, bytes) or the header. The stream
+    /// is read as it comes (never held whole in memory), and nothing is allocated for
+    /// voxels it does not hold: a header announcing 10^12 voxels over a few bytes ends at
+    /// the first missing byte, with memory in proportion to the bytes read.
+    pub fn read_olm<R: BufRead>(reader: R) -> Result<OccupancyList, ParseError> {
+        let mut r = StreamCursor::new(reader);
+        if r.at_end()? {
             return Err(ParseError::Empty);
         }
-        let mut r = ByteCursor::new(&data);
-        if r.take(8, "magic")? != OLM_MAGIC {
+        if &r.array::<8>("magic")? != OLM_MAGIC {
             return Err(ParseError::at(
                 Location::Byte(0),
                 "not an .olm file (bad magic bytes)",
@@ -286,11 +363,10 @@ impl OccupancyList {
         let resolution = r.f64("resolution")?;
         let n = r.u64("voxel count")?;
         let table = if version == VERSION_1 {
-            check_resolution(resolution)
-                .map_err(|e| ParseError::at(Location::Byte(12), e.to_string()))?;
-            read_v1(&data, &mut r, n)?
+            resolution_at_12(resolution)?;
+            read_v1(&mut r, n)?
         } else {
-            read_v2(&data, &mut r, n, resolution)?
+            read_v2(&mut r, n, resolution)?
         };
         let mut list = OccupancyList::new(resolution).expect("checked");
         list.table = table;

@@ -32,7 +32,108 @@ fn check_point(what: &str, p: &Point3<f64>) -> Result<()> {
     }
 }
 
+/// The key box of a list's stored voxels, for walks that stop once they leave it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct KeyBounds {
+    lo: [i64; 3],
+    hi: [i64; 3],
+}
+
+/// Keys beyond this (in voxels from the origin) do not fit a [`VoxelKey`]: a walk never
+/// starts or ends there.
+const FAR_KEY: f64 = i32::MAX as f64;
+
+/// Where a walk from `a` to `b` starts and ends, as fractions of the segment: the segment
+/// itself when both ends lie near the map, else cut to the stored voxels' box (nothing
+/// lies outside it). `None` when the segment misses the box.
+fn walk_span(a: &Point3<f64>, b: &Point3<f64>, r: f64, k: &KeyBounds) -> Option<(f64, f64)> {
+    let key = |p: &Point3<f64>, i: usize| (p[i] / r).floor();
+    let outside = (0..3).any(|i| {
+        let v = key(a, i);
+        v < k.lo[i] as f64 || v > k.hi[i] as f64
+    });
+    let far = (0..3).any(|i| key(b, i).abs() >= FAR_KEY);
+    if !outside && !far {
+        return Some((0.0, 1.0));
+    }
+    // Slab clipping of the segment against the box of the stored voxels' cubes, in
+    // halves so that `b - a` cannot overflow (ends at ±1e308 m).
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for i in 0..3 {
+        let (lo, hi) = (k.lo[i] as f64 * r, (k.hi[i] + 1) as f64 * r);
+        let half = 0.5 * b[i] - 0.5 * a[i];
+        if half == 0.0 {
+            if a[i] < lo || a[i] > hi {
+                return None;
+            }
+            continue;
+        }
+        let (u, v) = (
+            (0.5 * lo - 0.5 * a[i]) / half,
+            (0.5 * hi - 0.5 * a[i]) / half,
+        );
+        t0 = t0.max(u.min(v));
+        t1 = t1.min(u.max(v));
+    }
+    if t0 > t1 {
+        return None;
+    }
+    Some((if outside { t0 } else { 0.0 }, if far { t1 } else { 1.0 }))
+}
+
 impl OccupancyList {
+    /// The key box of the stored voxels, `None` when the list is empty.
+    pub(crate) fn key_bounds(&self) -> Option<KeyBounds> {
+        let mut lo = [i64::MAX; 3];
+        let mut hi = [i64::MIN; 3];
+        for (k, _) in self.iter() {
+            for (i, v) in [k.x, k.y, k.z].into_iter().enumerate() {
+                lo[i] = lo[i].min(v as i64);
+                hi[i] = hi[i].max(v as i64);
+            }
+        }
+        (!self.is_empty()).then_some(KeyBounds { lo, hi })
+    }
+
+    /// The voxels from `a` to `b` in order with the segment fraction where each is entered,
+    /// until `stop` says so: only the part of the segment that can meet a stored voxel is
+    /// walked (see [`walk_span`], [`VoxelRay::past_box`]), so a segment of 1e15 m costs no
+    /// more than one across the map, and its keys never leave the representable range.
+    fn walk(
+        &self,
+        a: &Point3<f64>,
+        b: &Point3<f64>,
+        bounds: Option<&KeyBounds>,
+        mut stop: impl FnMut(VoxelKey, f64) -> bool,
+    ) {
+        let Some(k) = bounds else { return };
+        let r = self.resolution();
+        let Some((t0, t1)) = walk_span(a, b, r, k) else {
+            return;
+        };
+        let at = |t: f64| {
+            if t == 0.0 {
+                *a
+            } else if t == 1.0 {
+                *b
+            } else {
+                Point3::from(a.coords * (1.0 - t) + b.coords * t)
+            }
+        };
+        let mut ray = VoxelRay::new(&at(t0), &at(t1), r);
+        while !ray.past_box(k.lo, k.hi) {
+            let Some(key) = ray.next() else { return };
+            let entry = if (t0, t1) == (0.0, 1.0) {
+                ray.entry()
+            } else {
+                t0 + ray.entry() * (t1 - t0)
+            };
+            if stop(key, entry) {
+                return;
+            }
+        }
+    }
+
     /// Casts a ray from `origin` along `direction` (any non-zero length; normalised here) up
     /// to `max_range` metres, walking the voxels in order (Amanatides & Woo, the traversal of
     /// [`super::VoxelRay`]), and returns the first voxel whose count is at least `min_count`
@@ -73,23 +174,54 @@ impl OccupancyList {
                 "ray range must be finite and >= 0 m, got {max_range}"
             )));
         }
-        let dir = direction / n;
-        let end = origin + dir * max_range;
+        Ok(self.cast_ray_in(
+            origin,
+            direction,
+            max_range,
+            min_count,
+            self.key_bounds().as_ref(),
+        ))
+    }
+
+    /// [`OccupancyList::cast_ray`] with checked arguments and the list's
+    /// [`OccupancyList::key_bounds`] computed once (a depth image casts a ray per pixel).
+    pub(crate) fn cast_ray_in(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        max_range: f64,
+        min_count: u16,
+        bounds: Option<&KeyBounds>,
+    ) -> Option<RayHit> {
+        let dir = direction / direction.norm();
+        let mut max_range = max_range;
+        let mut end = origin + dir * max_range;
+        if let (Some(k), false) = (bounds, end.iter().all(|v| v.is_finite())) {
+            // A range of 1e308 m overflows: walk as far as the box's far corner instead.
+            let r = self.resolution();
+            let corner = |i: usize| {
+                let (lo, hi) = (k.lo[i] as f64 * r, (k.hi[i] + 1) as f64 * r);
+                (origin[i] - lo).abs().max((origin[i] - hi).abs())
+            };
+            max_range = Vector3::new(corner(0), corner(1), corner(2)).norm() + r;
+            end = origin + dir * max_range;
+        }
         let min_count = min_count.max(1);
-        let mut ray = VoxelRay::new(origin, &end, self.resolution());
-        while let Some(key) = ray.next() {
+        let mut hit = None;
+        self.walk(origin, &end, bounds, |key, entry| {
             let count = self.count(key);
             if count >= min_count {
-                let distance = ray.entry().max(0.0) * max_range;
-                return Ok(Some(RayHit {
+                let distance = entry.max(0.0) * max_range;
+                hit = Some(RayHit {
                     key,
                     count,
                     distance,
                     point: origin + dir * distance,
-                }));
+                });
             }
-        }
-        Ok(None)
+            hit.is_some()
+        });
+        hit
     }
 
     /// Whether the segment from `a` to `b` crosses no voxel with a count of at least
@@ -114,7 +246,12 @@ impl OccupancyList {
         check_point("segment start", a)?;
         check_point("segment end", b)?;
         let min_count = min_count.max(1);
-        Ok(VoxelRay::new(a, b, self.resolution()).all(|k| self.count(k) < min_count))
+        let mut free = true;
+        self.walk(a, b, self.key_bounds().as_ref(), |k, _| {
+            free = self.count(k) < min_count;
+            !free
+        });
+        Ok(free)
     }
 
     /// The stored voxels whose centres lie within `radius` metres of `center`, sorted by key.

@@ -96,6 +96,21 @@ impl VoxelRay {
     pub fn remaining(&self) -> u64 {
         self.remaining.iter().sum::<u64>() + u64::from(!self.started)
     }
+
+    /// Whether every voxel still to come (the current one included) lies outside the key
+    /// box `[lo, hi]`: on some axis the keys the walk can still reach miss the box. A
+    /// query stops there instead of walking on through empty space (a ray of 1e12 m).
+    pub(crate) fn past_box(&self, lo: [i64; 3], hi: [i64; 3]) -> bool {
+        (0..3).any(|i| {
+            let (k, r) = (self.key[i], self.remaining[i] as i64);
+            let (a, b) = match self.step[i] {
+                1 => (k, k.saturating_add(r)),
+                -1 => (k.saturating_sub(r), k),
+                _ => (k, k),
+            };
+            b < lo[i] || a > hi[i]
+        })
+    }
 }
 
 impl Iterator for VoxelRay {
@@ -156,6 +171,23 @@ impl Default for SensorModel {
             max_count: MAX_COUNT,
             max_range: 30.0,
         }
+    }
+}
+
+impl SensorModel {
+    /// Checks the model: `max_range > 0` (infinite allowed: no cut), `1 <= max_count <=`
+    /// [`MAX_COUNT`]; [`Error::InvalidArgument`] names what is wrong.
+    pub fn validate(&self) -> Result<()> {
+        if self.max_range.is_nan()
+            || self.max_range <= 0.0
+            || self.max_count == 0
+            || self.max_count > MAX_COUNT
+        {
+            return Err(Error::InvalidArgument(format!(
+                "sensor model needs max_range > 0 and 1 <= max_count <= {MAX_COUNT}, got {self:?}"
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -260,15 +292,7 @@ impl OccupancyList {
         t_map_sensor: &Pose,
         model: &SensorModel,
     ) -> Result<(InsertStats, Vec<u64>)> {
-        if model.max_range.is_nan()
-            || model.max_range <= 0.0
-            || model.max_count == 0
-            || model.max_count > MAX_COUNT
-        {
-            return Err(Error::InvalidArgument(format!(
-                "sensor model needs max_range > 0 and 1 <= max_count <= {MAX_COUNT}, got {model:?}"
-            )));
-        }
+        model.validate()?;
         let res = self.resolution();
         let origin = t_map_sensor.transform_point(&cloud.origin());
         if self.pack(&origin).is_none() {

@@ -74,9 +74,10 @@ pub struct VoxelizeJob {
     pub output: PathBuf,
     /// Voxel edge, metres.
     pub resolution: f64,
-    /// Integrate with the ray-trace sensor model (else every endpoint adds 1).
+    /// Integrate with the ray-trace sensor model (else every endpoint adds `sensor.hit`).
     pub ray_trace: bool,
-    /// The sensor model of the ray tracing.
+    /// The sensor model: with ray tracing all of it; for endpoints, every point adds
+    /// `hit` to its voxel and counts stop at `max_count` (`miss` and `max_range` need rays).
     pub sensor: SensorModel,
     /// The clouds' poses.
     pub poses: CloudPoses,
@@ -97,12 +98,20 @@ pub struct VoxelizeRun {
 }
 
 /// Runs a [`VoxelizeJob`] ([`Stage::Voxelize`] progress per cloud): an output that is not a
-/// map file, or that cannot be written (no such folder, not writable, a folder), is
-/// refused before anything is read; an error inserting a cloud names it.
+/// map file, that cannot be written (no such folder, not writable, a folder), or a bad
+/// sensor model is refused before anything is read; an error inserting a
+/// cloud names it, and so does a point whose voxel key is outside the representable range
+/// ([`OccupancyList::check_keys`]: too fine a resolution for the clouds' extent).
 pub fn run_voxelize(job: &VoxelizeJob, progress: Progress<'_>) -> Result<VoxelizeRun> {
     let start = Instant::now();
     MapFormat::of_output(&job.output)?;
     crate::file::check_output(&job.output, "map")?;
+    job.sensor.validate()?;
+    if job.sensor.hit == 0 && !job.ray_trace {
+        return Err(Error::InvalidArgument(
+            "endpoints need a hit of at least 1: a hit of 0 adds nothing to the map".into(),
+        ));
+    }
     let poses = cloud_poses(&job.poses, &job.clouds)?;
     let mut map = OccupancyList::new(job.resolution)?;
     let mut total = InsertStats::default();
@@ -118,6 +127,7 @@ pub fn run_voxelize(job: &VoxelizeJob, progress: Progress<'_>) -> Result<Voxeliz
             continue;
         }
         points += cloud.len();
+        map.check_keys(&cloud, pose, &path.display().to_string())?;
         if job.ray_trace {
             let s = map
                 .insert_scan(&cloud, pose, &job.sensor)
@@ -128,9 +138,13 @@ pub fn run_voxelize(job: &VoxelizeJob, progress: Progress<'_>) -> Result<Voxeliz
             total.voxels_traversed += s.voxels_traversed;
             total.removed_voxels += s.removed_voxels;
         } else {
-            total.skipped += map.add_points(&cloud, pose, 1) as u64;
+            total.skipped += map.add_points(&cloud, pose, job.sensor.hit) as u64;
         }
         progress(Stage::Voxelize, i + 1, n);
+    }
+    if !job.ray_trace {
+        // Saturating additions then one clamp: the same as clamping after every cloud.
+        map.clamp_counts(job.sensor.max_count);
     }
     map.shrink_to_fit();
     write_map(&job.output, &map)?;

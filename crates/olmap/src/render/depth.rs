@@ -161,6 +161,12 @@ pub fn render_depth(
         )));
     }
     let origin = t_map_camera.transform_point(&nalgebra::Point3::origin());
+    if !origin.iter().all(|v| v.is_finite()) {
+        return Err(Error::InvalidArgument(format!(
+            "the camera position must be finite, got {origin}"
+        )));
+    }
+    let bounds = map.key_bounds();
     let (w, h) = camera.size();
     let rows: Vec<Vec<f32>> = (0..h)
         .into_par_iter()
@@ -168,9 +174,13 @@ pub fn render_depth(
             (0..w)
                 .map(|u| {
                     let dir = t_map_camera.transform_vector(&camera.ray(u, v));
-                    match map.cast_ray(&origin, &dir, max_range, min_count) {
-                        Ok(Some(hit)) => hit.distance as f32,
-                        _ => f32::NAN,
+                    let n = dir.norm();
+                    if !(n.is_finite() && n > 0.0) {
+                        return f32::NAN;
+                    }
+                    match map.cast_ray_in(&origin, &dir, max_range, min_count, bounds.as_ref()) {
+                        Some(hit) => hit.distance as f32,
+                        None => f32::NAN,
                     }
                 })
                 .collect()

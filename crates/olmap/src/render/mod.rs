@@ -31,7 +31,7 @@ pub use colour::{heat_colour, height_colour, PALETTE};
 pub use coloured_cloud::height_coloured_cloud;
 pub use depth::{render_depth, Camera, DepthImage};
 pub use image::{Rgb, RgbImage};
-pub use overlap_surface::{overlap_surface, OverlapSurface, OverlapSurfaceParams};
+pub use overlap_surface::{overlap_surface, OverlapSurface, OverlapSurfaceParams, MAX_HEADINGS};
 pub use png::{png_bytes, write_png};
 pub use report::{DepthReport, OverlapReport, PeakReport, RenderReport, TopViewReport};
 pub use top_view::{render_top_view, TopView, TopViewOptions, BACKGROUND, GRID_COLOUR};

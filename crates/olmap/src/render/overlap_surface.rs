@@ -16,9 +16,13 @@ pub struct OverlapSurfaceParams {
     pub half_width: f64,
     /// Spacing of the x, y samples in whole voxels (at least 1).
     pub stride: u32,
-    /// Headings tried per cell, evenly over the full turn starting at the centre's yaw.
+    /// Headings tried per cell, evenly over the full turn starting at the centre's yaw
+    /// (1 to [`MAX_HEADINGS`]).
     pub headings: u32,
 }
+
+/// The most headings [`overlap_surface`] tries per cell: 3600, every 0.1°.
+pub const MAX_HEADINGS: u32 = 3600;
 
 impl Default for OverlapSurfaceParams {
     fn default() -> Self {
@@ -102,13 +106,24 @@ pub fn overlap_surface(
     }
     let stride = params.stride.max(1) as i64;
     let half = (params.half_width / r / stride as f64 + 1e-9).floor();
-    if !(0.0..=500.0).contains(&half) || params.headings == 0 {
+    if !(0.0..=500.0).contains(&half) || !(1..=MAX_HEADINGS).contains(&params.headings) {
         return Err(Error::InvalidArgument(format!(
-            "overlap surface needs 0 <= half_width / (stride * resolution) <= 500 and headings >= 1, got {params:?}"
+            "overlap surface needs 0 <= half_width / (stride * resolution) <= 500 and 1 to \
+             {MAX_HEADINGS} headings, got {params:?}"
         )));
     }
     let half = half as i64;
     let n = (2 * half + 1) as usize;
+    // One overlap per heading and cell is held until the best heading is picked.
+    crate::limits::check_memory(
+        || {
+            format!(
+                "an overlap surface of {n} x {n} cells and {} headings",
+                params.headings
+            )
+        },
+        (n * n) as f64 * params.headings as f64 * 8.0,
+    )?;
     let t = centre.translation();
     if !t.iter().all(|v| v.is_finite()) {
         return Err(Error::InvalidArgument(format!(

@@ -305,16 +305,30 @@ fn draw_grid(image: &mut RgbImage, frame: &Frame, g: f64) {
         ((y_max - h as f64 * ps) / g).ceil() as i64,
         (y_max / g).floor() as i64,
     );
-    for k in gx0..=gx1 {
-        let (i, _) = frame.pixel(k as f64 * g, y_max);
+    // More lines than pixels (a grid step below the pixel size, 1 m at 1e20 m per pixel):
+    // every column and row holds a line; walking the lines would take forever.
+    let columns: Vec<i32> = if gx1.saturating_sub(gx0) >= w as i64 {
+        (0..w as i32).collect()
+    } else {
+        (gx0..=gx1)
+            .map(|k| frame.pixel(k as f64 * g, y_max).0)
+            .collect()
+    };
+    for i in columns {
         if (0..w as i32).contains(&i) {
             for j in 0..h {
                 image.put_pixel(i as u32, j, GRID_COLOUR);
             }
         }
     }
-    for k in gy0..=gy1 {
-        let (_, j) = frame.pixel(x_min, k as f64 * g);
+    let rows: Vec<i32> = if gy1.saturating_sub(gy0) >= h as i64 {
+        (0..h as i32).collect()
+    } else {
+        (gy0..=gy1)
+            .map(|k| frame.pixel(x_min, k as f64 * g).1)
+            .collect()
+    };
+    for j in rows {
         if (0..h as i32).contains(&j) {
             for i in 0..w {
                 image.put_pixel(i, j as u32, GRID_COLOUR);

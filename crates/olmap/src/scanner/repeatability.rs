@@ -58,10 +58,16 @@ pub fn repeatability(
             "repeatability: both scans need points".into(),
         ));
     }
-    if !(params.bin_width > 0.0 && params.threshold >= 0.0) {
-        return Err(Error::InvalidArgument(
-            "repeatability: bin width must be > 0 and threshold >= 0".into(),
-        ));
+    if !(params.bin_width.is_finite()
+        && params.bin_width > 0.0
+        && params.threshold.is_finite()
+        && params.threshold >= 0.0)
+    {
+        return Err(Error::InvalidArgument(format!(
+            "repeatability: bin width must be a finite number > 0 m and threshold a finite \
+             number >= 0 m, got {} and {}",
+            params.bin_width, params.threshold
+        )));
     }
     let coords: Vec<[f64; 3]> = b
         .points()
@@ -89,7 +95,10 @@ pub fn repeatability(
         0.5 * (d[n / 2 - 1] + d[n / 2])
     };
     let max = d[n - 1];
-    let bins = ((max / params.bin_width) as usize + 1).min(1 << 20);
+    // Saturating: a bin of 1e-20 m asks for more than `usize::MAX` bins (capped below).
+    let bins = ((max / params.bin_width) as usize)
+        .saturating_add(1)
+        .min(1 << 20);
     let mut hist = vec![0usize; bins];
     for &x in &d {
         hist[((x / params.bin_width) as usize).min(bins - 1)] += 1;

@@ -71,7 +71,40 @@ impl Default for SimConfig {
     }
 }
 
+impl Scanner3d {
+    /// Beams fired per 3D scan (the most points a scan can hold).
+    pub fn beams_per_scan(&self) -> f64 {
+        match self {
+            Scanner3d::Mirror(m) => m.sweeps() as f64 * m.geometry.scan_beams as f64,
+            Scanner3d::Lidar(l) => l.azimuths() as f64 * l.beams as f64,
+        }
+    }
+}
+
+/// Bytes a simulated 3D point takes in memory: its coordinates and intensity.
+const BYTES_PER_SIM_POINT: f64 = 16.0;
+/// Bytes of a raw mirror log per beam: its range.
+const BYTES_PER_RAW_BEAM: f64 = 4.0;
+/// Bytes per stop and robot besides the scans: poses, odometry, sightings.
+const BYTES_PER_SIM_STOP: f64 = 512.0;
+
 impl SimConfig {
+    /// The memory a simulation of this size holds at once, bytes (every scan of every
+    /// robot at every stop, at most one point per beam): what [`simulate`] checks against
+    /// [`crate::limits::MAX_ESTIMATE_BYTES`] before planning anything.
+    pub fn memory_estimate(&self) -> f64 {
+        let beams = self.scanner.beams_per_scan();
+        let raw = if self.raw_logs {
+            BYTES_PER_RAW_BEAM
+        } else {
+            0.0
+        };
+        let planar = self.scanner2d.as_ref().map_or(0.0, |p| p.beams() as f64) * 8.0;
+        self.robots as f64
+            * self.stops as f64
+            * (beams * (BYTES_PER_SIM_POINT + raw) + planar + BYTES_PER_SIM_STOP)
+    }
+
     /// Every parameter as JSON, for the dataset manifest.
     pub fn parameters(&self) -> serde_json::Value {
         let r = &self.robot;
@@ -177,6 +210,17 @@ pub fn simulate(config: &SimConfig, mut progress: impl FnMut(usize, usize)) -> R
             "a simulation needs at least one robot and one stop".into(),
         ));
     }
+    crate::limits::check_memory(
+        || {
+            format!(
+                "a simulation of {} robots x {} stops ({:.0} beams per scan)",
+                config.robots,
+                config.stops,
+                config.scanner.beams_per_scan()
+            )
+        },
+        config.memory_estimate(),
+    )?;
     let seed = config.seed;
     let world = config.world.build(seed);
     let mut rng = SimRng::new(mix64(seed ^ 0x7472_616a));

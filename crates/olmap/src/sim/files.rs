@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Sighting;
 use crate::error::{Error, ParseError, Result};
+use crate::file::text::json_message;
 use crate::file::OutputSet;
 use crate::geometry::PoseList;
 
@@ -88,12 +89,43 @@ pub struct DatasetOnDisk {
     pub dir: PathBuf,
     /// The manifest.
     pub manifest: DatasetManifest,
-    /// Ground truth per robot (manifest order).
+    /// Ground truth per robot (manifest order); empty for a robot whose truth file was
+    /// skipped (see `skipped`).
     pub truth: Vec<PoseList>,
-    /// Odometry per robot.
+    /// Odometry per robot; empty for a robot whose odometry file was skipped.
     pub odometry: Vec<PoseList>,
     /// All sightings.
     pub sightings: Vec<Sighting>,
+    /// Pose files left out because they are missing, unreadable or of the wrong length:
+    /// a dataset is still mapped without them (a robot without odometry is mapped
+    /// without priors; without every robot's truth there is no evaluation).
+    pub skipped: Vec<SkippedInput>,
+}
+
+/// An input of a dataset left out, and why: the caller warns about it and goes on.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SkippedInput {
+    /// The file.
+    pub path: String,
+    /// Why it was left out (the error reading it).
+    pub reason: String,
+}
+
+impl DatasetOnDisk {
+    /// Whether every robot's ground truth was read (the maps can be evaluated).
+    pub fn has_truth(&self) -> bool {
+        let truth_files: Vec<PathBuf> = self
+            .manifest
+            .robots
+            .iter()
+            .map(|r| self.dir.join(&r.truth))
+            .collect();
+        !self.skipped.iter().any(|s| {
+            truth_files
+                .iter()
+                .any(|t| t.display().to_string() == s.path)
+        })
+    }
 }
 
 impl DatasetOnDisk {
@@ -221,12 +253,19 @@ fn read_text<T>(
 }
 
 /// Reads a dataset folder: the manifest (format and version checked), every robot's pose
-/// lists (one pose per scan, checked) and the sightings (robot indices checked).
+/// lists (one pose per scan, checked) and the sightings (robot indices checked). A pose
+/// list that is missing, unreadable or of the wrong length is left out and listed in
+/// [`DatasetOnDisk::skipped`]; a bad manifest or sightings table is an error.
 pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
     let dir = dir.as_ref();
     let manifest_path = dir.join("manifest.json");
     let manifest: DatasetManifest = read_text(&manifest_path, "dataset manifest", |r| {
-        serde_json::from_reader(r).map_err(|e| ParseError::line(e.line(), format!("{e}")))
+        serde_json::from_reader(r).map_err(|e| {
+            ParseError::line(
+                e.line(),
+                format!("column {}: {}", e.column(), json_message(&e)),
+            )
+        })
     })?;
     let bad = |reason: String| Error::Read {
         path: manifest_path.clone(),
@@ -247,21 +286,36 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
     }
     let mut truth = Vec::new();
     let mut odometry = Vec::new();
+    let mut skipped = Vec::new();
     for r in &manifest.robots {
-        let t = PoseList::read_path(dir.join(&r.truth))?;
-        let o = PoseList::read_path(dir.join(&r.odometry))?;
-        for (what, list) in [("truth", &t), ("odometry", &o)] {
-            if list.len() != r.scans.len() {
-                return Err(bad(format!(
-                    "robot {}: {} scans but {} {what} poses",
-                    r.name,
-                    r.scans.len(),
-                    list.len()
-                )));
+        for (what, file, lists) in [
+            ("truth", &r.truth, &mut truth),
+            ("odometry", &r.odometry, &mut odometry),
+        ] {
+            let path = dir.join(file);
+            let list = PoseList::read_path(&path).and_then(|list| {
+                if list.len() == r.scans.len() {
+                    Ok(list)
+                } else {
+                    Err(bad(format!(
+                        "robot {}: {} scans but {} {what} poses",
+                        r.name,
+                        r.scans.len(),
+                        list.len()
+                    )))
+                }
+            });
+            match list {
+                Ok(list) => lists.push(list),
+                Err(e) => {
+                    skipped.push(SkippedInput {
+                        path: path.display().to_string(),
+                        reason: e.to_string(),
+                    });
+                    lists.push(PoseList::default());
+                }
             }
         }
-        truth.push(t);
-        odometry.push(o);
     }
     let sightings_path = dir.join(&manifest.sightings);
     let sightings = read_text(&sightings_path, "sightings CSV", read_sightings)?;
@@ -282,6 +336,7 @@ pub fn read_dataset(dir: impl AsRef<Path>) -> Result<DatasetOnDisk> {
         truth,
         odometry,
         sightings,
+        skipped,
     })
 }
 

@@ -21,7 +21,7 @@ mod worlds;
 pub use benchmark::{thesis_localisation, LocalisationBenchmark, THESIS_RESOLUTION};
 pub use dataset::{simulate, Scanner3d, SimConfig, SimDataset, SimRobot};
 pub use demo::{run_demo, DemoConfig, DemoReport, DemoRun};
-pub use files::{check_dataset_output, read_dataset, write_dataset, DatasetOnDisk};
+pub use files::{check_dataset_output, read_dataset, write_dataset, DatasetOnDisk, SkippedInput};
 pub use report::SimulateReport;
 pub use rng::{mix64, SimRng};
 pub use robot::{

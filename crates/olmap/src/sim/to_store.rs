@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use super::files::DatasetOnDisk;
+use super::files::{DatasetOnDisk, SkippedInput};
 use super::{Sighting, SimDataset};
 use crate::cloud::PointCloud;
 use crate::error::{Error, ParseError, Result};
@@ -61,6 +61,17 @@ impl DatasetOnDisk {
     /// [`SimDataset::to_store`]); the scans are read from their PCD files with
     /// [`crate::io::read_cloud`], the time step is the manifest's `stop_interval_s`.
     pub fn to_store(&self) -> Result<ScanStore> {
+        self.store(false).map(|(store, _)| store)
+    }
+
+    /// [`DatasetOnDisk::to_store`] leaving out every scan that cannot be read (with its
+    /// sightings), listed with the reason: one bad file does not stop a team run.
+    pub fn to_store_skipping(&self) -> Result<(ScanStore, Vec<SkippedInput>)> {
+        self.store(true)
+    }
+
+    fn store(&self, skip: bool) -> Result<(ScanStore, Vec<SkippedInput>)> {
+        let mut skipped = Vec::new();
         let counts: Vec<usize> = self.manifest.robots.iter().map(|r| r.scans.len()).collect();
         let groups = group_sightings(&self.sightings, &counts).map_err(|reason| Error::Read {
             path: self.dir.join(&self.manifest.sightings),
@@ -72,7 +83,17 @@ impl DatasetOnDisk {
             let id = index_u32(r, "robot index")?;
             store.set_robot_name(id, &files.name)?;
             for (k, path) in self.scan_paths(r).iter().enumerate() {
-                let cloud = crate::io::read_cloud(path)?.cloud;
+                let cloud = match crate::io::read_cloud(path) {
+                    Ok(loaded) => loaded.cloud,
+                    Err(e) if skip => {
+                        skipped.push(SkippedInput {
+                            path: path.display().to_string(),
+                            reason: e.to_string(),
+                        });
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                };
                 let odometry = self
                     .odometry
                     .get(r)
@@ -88,7 +109,7 @@ impl DatasetOnDisk {
                 )?)?;
             }
         }
-        Ok(store)
+        Ok((store, skipped))
     }
 }
 

@@ -1,4 +1,5 @@
-//! Property tests: random and mutated bytes fed to every reader never panic.
+//! Property tests: random and mutated bytes fed to every reader never panic; and the short
+//! pass of the mutation fuzzer (`olmap::fuzz`) over every reader, real samples included.
 
 use olmap::io::{self, CloudFormat, PcdEncoding, PlyEncoding, ReadOptions, WriteOptions};
 use proptest::prelude::*;
@@ -92,7 +93,10 @@ proptest! {
 
 fn olm_sample() -> Vec<u8> {
     let cloud = synthetic_cloud(300);
-    let map = olmap::occupancy::OccupancyList::from_cloud(&cloud, 0.5).unwrap();
+    // The cloud's extreme points (3.4e38 m) have no voxel key: `from_cloud` refuses them,
+    // `add_points` skips them.
+    let mut map = olmap::occupancy::OccupancyList::new(0.5).unwrap();
+    map.add_points(&cloud, &olmap::geometry::Pose::identity(), 1);
     let mut buf = Vec::new();
     map.write_olm(&mut buf).unwrap();
     buf
@@ -113,4 +117,79 @@ proptest! {
         bt.extend_from_slice(&noise);
         let _ = olmap::io::octomap_bt::read(&bt[..], 1 << 20);
     }
+}
+
+/// The CI pass of the fuzzer: 20,000 mutated inputs (about a second) over every reader (the real
+/// samples when the shared data is there), no panic, no time bomb, no message that says a
+/// clause twice, and every unmutated sample readable. Long runs: `examples/fuzz.rs`.
+#[test]
+fn fuzz_short_pass_over_every_reader() {
+    let samples = olmap::fuzz::corpus(crate::data().as_deref()).unwrap();
+    let config = olmap::fuzz::FuzzConfig {
+        seed: 22,
+        cases: Some(20_000),
+        // Generous for a debug build on a busy machine: a case takes microseconds.
+        slow_seconds: 5.0,
+        ..Default::default()
+    };
+    let report = olmap::fuzz::run(&config, &samples, |_| {});
+    for f in &report.findings {
+        eprintln!(
+            "{:?}: {} case {:?} from {}",
+            f.kind,
+            f.target.name(),
+            f.case,
+            f.sample
+        );
+    }
+    assert!(
+        report.findings.is_empty(),
+        "{} findings",
+        report.findings.len()
+    );
+    assert_eq!(report.cases, 20_000);
+    // Every reader ran, and saw both inputs it accepts and inputs it refuses.
+    for t in &report.targets {
+        assert!(t.cases >= 40, "{}: {} cases", t.target, t.cases);
+        assert!(t.refused > 0, "{}: nothing refused", t.target);
+    }
+    let names: Vec<&str> = report.targets.iter().map(|t| t.target.as_str()).collect();
+    for needed in [
+        "PCD",
+        "PLY",
+        "XYZ text",
+        "3DTK .3d",
+        "CSV point table",
+        "KITTI .bin",
+        "OctoMap ScanGraph",
+        "olmap .olm",
+        "OctoMap .bt",
+        "pose list",
+        "CSV pose table",
+        "3DTK .pose",
+        "3DTK .frames",
+        "scan store",
+        "scan store salvage",
+        "mirror log",
+        "laser scan CSV",
+        "laser scan JSON",
+        "bzip2 XYZ text",
+    ] {
+        assert!(names.contains(&needed), "{needed} not fuzzed: {names:?}");
+    }
+}
+
+#[test]
+fn fuzz_cases_replay_exactly() {
+    let samples = olmap::fuzz::corpus(None).unwrap();
+    for case in [0, 17, 999] {
+        let (a, bytes_a, out_a) = olmap::fuzz::replay(&samples, 5, case);
+        let (b, bytes_b, out_b) = olmap::fuzz::replay(&samples, 5, case);
+        assert_eq!((a, &bytes_a), (b, &bytes_b));
+        assert_eq!(out_a, out_b);
+    }
+    assert_ne!(
+        olmap::fuzz::case_input(&samples, 5, 1).1,
+        olmap::fuzz::case_input(&samples, 6, 1).1
+    );
 }

@@ -9,12 +9,12 @@ use std::path::{Path, PathBuf};
 /// The layers, bottom first; modules in one layer may not import each other.
 const LAYERS: &[&[&str]] = &[
     &["error", "progress"],
-    &["file"],
+    &["file", "limits"],
     &["geometry"],
     &["cloud"],
     &["io"],
     &["occupancy"],
-    &["scanner", "beacon", "grid2d"],
+    &["scanner", "beacon", "grid2d", "graph"],
     &["align"],
     &["render"],
     &["report"],
@@ -22,7 +22,7 @@ const LAYERS: &[&[&str]] = &[
     &["team"],
     &["sim"],
     &["fixtures", "test_data"],
-    &["bench"],
+    &["bench", "fuzz"],
 ];
 
 fn rank(module: &str) -> Option<usize> {

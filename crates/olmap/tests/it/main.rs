@@ -3,12 +3,15 @@
 mod align;
 mod align_exact;
 mod align_synthetic;
+mod audit_readers;
 mod bad_input;
 mod beacon;
 mod data_safety;
 mod fuzz;
+mod graph;
 mod grid2d;
 mod layers;
+mod limits;
 mod mapping;
 mod mutual;
 mod occupancy;

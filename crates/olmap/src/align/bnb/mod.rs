@@ -48,7 +48,7 @@ use std::time::Instant;
 
 use self::bound::{build_levels, level_shapes};
 use self::node::{Bnb, Head, Worker};
-use self::pass::{Pass, NO_SCORE};
+use self::pass::{Budget, Pass, NO_SCORE};
 use super::lattice::{
     finish, no_overlap, prepare, region_counts, threshold, Alignment, Lattice, LevelReport, Scored,
 };
@@ -74,6 +74,13 @@ const STRIDE_SLACK: u32 = 2;
 /// the 3DTK pair 1 -> 0 the first pass took 75 s with 0, 48 s with 2, 50 s with 3 and
 /// 53 s with 4 (2 cores).
 const ROTATION_LAG: u32 = 2;
+/// The default of [`SearchParams::exact_max_work`]: the most work the exact search does
+/// before it gives up with [`Error::TooLarge`], in voxel bounds (one node bounded over one
+/// scan voxel). On targets where every pose scores alike (a scan of a floor against a
+/// floor) no bound prunes and the search would run for hours. The hardest real pair, 3DTK
+/// scan001 against scan000 (global, x-y-z-yaw), bounds 36.5 million nodes of 2,516 voxels:
+/// 9.2e10, a fifth of this.
+pub const EXACT_MAX_WORK: u64 = 500_000_000_000;
 /// The exact search counts clusters (its [`Alignment::ambiguity`]) up to this many: each
 /// takes a pass, and a scene with more distinct solutions is ambiguous whatever their
 /// number. Below the cap the count is that of the exhaustive search.
@@ -94,6 +101,7 @@ pub(super) fn exact_search(
     let searched_t = [true, true, l.searched_t[2]];
     let searched_r = l.searched_r;
     let top = top_level(n_r, n_t, searched_r);
+    check_roots(n_r, n_t, searched_r, top)?;
     let scan = &problem.scan[0];
     let shapes = level_shapes(l, scan, top, searched_t, searched_r);
     let levels = build_levels(&shapes, target.pyramid.base(), problem.free[0])?;
@@ -111,7 +119,21 @@ pub(super) fn exact_search(
         ambiguity_angle: params.ambiguity_angle,
     };
     let n_levels = top as usize + 1;
-    let (found, bounded, passed) = passes(&bnb, params, n_levels);
+    let budget = Budget::new(params.exact_max_work);
+    let (found, bounded, passed) = passes(&bnb, params, n_levels, &budget);
+    if budget.exhausted() {
+        return Err(Error::TooLarge {
+            what: format!(
+                "the exact search gave up after bounding {} nodes ({:.2e} voxel bounds): \
+                 too many poses score alike for the bounds to prune (a flat or repetitive \
+                 scene); use the multi-resolution search, a window, or a larger \
+                 exact_max_work",
+                bounded.iter().sum::<usize>(),
+                budget.spent.load(std::sync::atomic::Ordering::Relaxed) as f64
+            ),
+            limit: format!("{:.2e} voxel bounds", params.exact_max_work as f64),
+        });
+    }
     let reports: Vec<LevelReport> = (0..n_levels)
         .rev()
         .map(|lv| LevelReport {
@@ -147,17 +169,18 @@ pub(super) fn exact_search(
 /// The coarsest level: the first with at most [`ROOT_TRANSLATIONS`] translation blocks and
 /// [`ROOT_NODES`] roots (at most 16), for `n_r` rotations and `n_t` translations.
 fn top_level(n_r: [i32; 3], n_t: [i32; 3], searched_r: [bool; 3]) -> u32 {
+    // Saturating products: a window of 1e20 m has 2^31 translations per axis.
     let roots_at = |level: u32| -> u64 {
         (0..3)
             .map(|i| (n_t[i] as u64).div_ceil(1 << level))
-            .product()
+            .fold(1, u64::saturating_mul)
     };
     let rot_roots_at = |level: u32| -> u64 {
         let r = level.saturating_sub(ROTATION_LAG);
         (0..3)
             .filter(|&i| searched_r[i])
             .map(|i| (n_r[i] as u64).div_ceil(1 << r))
-            .product()
+            .fold(1, u64::saturating_mul)
     };
     let mut top = 0u32;
     while (roots_at(top) > ROOT_TRANSLATIONS
@@ -169,12 +192,30 @@ fn top_level(n_r: [i32; 3], n_t: [i32; 3], searched_r: [bool; 3]) -> u32 {
     top
 }
 
+/// Refuses a region whose roots at the coarsest level (at most 16) do not fit in memory
+/// (a window of 1e9 m: the roots are listed before they are bounded).
+fn check_roots(n_r: [i32; 3], n_t: [i32; 3], searched_r: [bool; 3], top: u32) -> Result<()> {
+    let r = top.saturating_sub(ROTATION_LAG);
+    let blocks = |n: i32, shift: u32| (n.max(1) as f64 / (1u64 << shift) as f64).ceil();
+    let roots: f64 = (0..3).map(|i| blocks(n_t[i], top)).product::<f64>()
+        * (0..3)
+            .filter(|&i| searched_r[i])
+            .map(|i| blocks(n_r[i], r))
+            .product::<f64>();
+    // A root is a block (rotation, translation and bound: 32 bytes) and its listing.
+    crate::limits::check_memory(
+        || format!("the exact search's {roots:.3e} root blocks"),
+        roots * 64.0,
+    )
+}
+
 /// The passes (see the module documentation): the best pose of each cluster, best first,
 /// up to [`EXACT_MAX_AMBIGUITY`], with the nodes bounded and passed per level.
 fn passes(
     bnb: &Bnb,
     params: &SearchParams,
     n_levels: usize,
+    budget: &Budget,
 ) -> (Vec<Scored>, Vec<usize>, Vec<usize>) {
     let l: &Lattice = bnb.lattice;
     let new_worker = || Worker::new(n_levels);
@@ -189,6 +230,7 @@ fn passes(
             heads: &heads,
             floor,
             best: AtomicI64::new(NO_SCORE),
+            budget,
         };
         let workers = pass.run(&new_worker);
         for w in &workers {
@@ -196,6 +238,9 @@ fn passes(
                 bounded[lv] += w.bounded[lv];
                 passed[lv] += w.passed[lv];
             }
+        }
+        if budget.exhausted() {
+            break;
         }
         let best = workers.iter().filter_map(|w| w.best).reduce(|a, b| {
             if b.score > a.score || (b.score == a.score && b.cand < a.cand) {

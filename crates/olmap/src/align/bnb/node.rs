@@ -5,7 +5,7 @@
 use nalgebra::{Point3, Rotation3, UnitQuaternion, Vector3};
 
 use super::bound::Level;
-use crate::align::lattice::{Lattice, Scored};
+use crate::align::lattice::{cell_index, Lattice, Scored};
 use crate::geometry::rotation_from_yaw_pitch_roll;
 
 /// A node found worth expanding: its bound, rotation block and translation block.
@@ -161,7 +161,7 @@ impl Bnb<'_> {
         out.extend(self.scan.iter().map(|c| {
             // The formula of `key_of` (`v - 0.0` is `v`, so the same keys at margin 0).
             let p = rot * c.coords + t0;
-            let k = |v: f64, m: f64, s: u32| -> i64 { (((v - m) / cell).floor() as i64) >> s };
+            let k = |v: f64, m: f64, s: u32| -> i64 { cell_index(v - m, cell) >> s };
             [
                 k(p.x, lv.margin[0], lv.shift[0]),
                 k(p.y, lv.margin[1], lv.shift[1]),

@@ -2,7 +2,7 @@
 //! neighbourhoods, roots bounded in parallel, then each expanded depth first by a pool of
 //! workers sharing the best score found.
 
-use std::sync::atomic::{AtomicI64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
 
 use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
@@ -14,16 +14,53 @@ use crate::align::lattice::{Cand, Scored};
 /// room left below it so that sums cannot overflow.
 pub(super) const NO_SCORE: i64 = i64::MIN / 4;
 
+/// The work the passes of one search may do, shared by them: voxel bounds (a node's
+/// bound reads each scan voxel once), up to a limit.
+pub(super) struct Budget {
+    pub(super) spent: AtomicU64,
+    pub(super) limit: u64,
+    pub(super) exhausted: AtomicBool,
+}
+
+impl Budget {
+    /// A budget of `limit` voxel bounds.
+    pub(super) fn new(limit: u64) -> Self {
+        Budget {
+            spent: AtomicU64::new(0),
+            limit,
+            exhausted: AtomicBool::new(false),
+        }
+    }
+
+    /// Counts `n` more voxel bounds; marks the budget exhausted past the limit.
+    fn spend(&self, n: u64) {
+        if self.spent.fetch_add(n, Ordering::Relaxed).saturating_add(n) > self.limit {
+            self.exhausted.store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Whether the limit was passed (the search stops and reports it).
+    pub(super) fn exhausted(&self) -> bool {
+        self.exhausted.load(Ordering::Relaxed)
+    }
+}
+
 /// One pass: the best pose outside the heads' neighbourhoods scoring at least `floor`.
 pub(super) struct Pass<'a> {
     pub(super) bnb: &'a Bnb<'a>,
     pub(super) heads: &'a [Head],
     pub(super) floor: i64,
     pub(super) best: AtomicI64,
+    pub(super) budget: &'a Budget,
 }
 
 impl Pass<'_> {
+    /// The score a node must reach to be kept; above every score once the budget is
+    /// exhausted, so that every worker unwinds at once.
     fn cut(&self) -> i64 {
+        if self.budget.exhausted() {
+            return i64::MAX;
+        }
         self.best.load(Ordering::Relaxed).max(self.floor)
     }
 
@@ -135,6 +172,7 @@ impl Pass<'_> {
                 live.push(Child::new(tk, b.offset(tk, cl), ri * t_kids.len() + ti));
             }
             w.bounded[cl as usize] += live.len();
+            self.budget.spend((live.len() * n) as u64);
             b.bound_children(cl, &keys, &order, vals, &rest, &mut live, &mut buf, || {
                 self.cut()
             });
@@ -243,6 +281,8 @@ impl Pass<'_> {
             w.live = live;
             bound
         };
+        self.budget
+            .spend((rot_roots.len() * t_roots.len() * n) as u64);
         let mut roots: Vec<Block> = rot_roots
             .par_iter()
             .map_init(new_worker, |w, rb| {

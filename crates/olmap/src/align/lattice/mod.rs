@@ -115,6 +115,18 @@ impl Lattice {
     }
 }
 
+/// Keys of moved scan voxels are clamped to `±KEY_CLAMP` cells: far outside every grid
+/// (whose keys fit in an `i32`), yet far from `i64` overflow when the scoring adds
+/// translations and subtracts box corners. A prior 1e20 m away would otherwise make
+/// `floor` saturate at `i64::MAX` and the next addition overflow.
+pub(crate) const KEY_CLAMP: f64 = (1u64 << 40) as f64;
+
+/// `floor(v / cell)` as a key, clamped to [`KEY_CLAMP`] (NaN gives 0).
+#[inline]
+pub(crate) fn cell_index(v: f64, cell: f64) -> i64 {
+    (v / cell).floor().clamp(-KEY_CLAMP, KEY_CLAMP) as i64
+}
+
 /// The cell of a scan voxel centre `c` rotated by `rot` and moved by `t0`: the one formula
 /// every search uses, so that they score a pose bit for bit alike.
 #[inline]
@@ -126,8 +138,8 @@ pub(crate) fn key_of(
 ) -> [i64; 3] {
     let p = rot * c.coords + t0;
     [
-        (p.x / cell).floor() as i64,
-        (p.y / cell).floor() as i64,
-        (p.z / cell).floor() as i64,
+        cell_index(p.x, cell),
+        cell_index(p.y, cell),
+        cell_index(p.z, cell),
     ]
 }

@@ -34,52 +34,6 @@ pub(crate) struct Problem<'a> {
     pub(crate) map_cells: f64,
 }
 
-fn check(params: &SearchParams) -> Result<()> {
-    let bad = |what: &str| Err(Error::InvalidArgument(what.to_string()));
-    if !(params.resolution.is_finite() && params.resolution > 0.0) {
-        return bad("search resolution must be > 0 m");
-    }
-    if params.levels > 12 {
-        return bad("search levels must be 0 (automatic) to 12");
-    }
-    if !(params.keep_ratio > 0.0 && params.keep_ratio <= 1.0) {
-        return bad("keep_ratio must be in (0, 1]");
-    }
-    if !(params.horizontal_share > 0.0 && params.horizontal_share <= 1.0) {
-        return bad("horizontal_share must be in (0, 1]");
-    }
-    if params.max_scan_voxels == 0 {
-        return bad("max_scan_voxels must be positive");
-    }
-    if !(params.max_range.is_finite() && params.max_range > 0.0) {
-        return bad("max_range must be > 0 m");
-    }
-    if let Region::Window { xy, z, yaw } = params.region {
-        if [xy, z, yaw].iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            return bad("window half-widths must be >= 0");
-        }
-    }
-    if let Region::Locus(l) = params.region {
-        let values = [
-            l.center[0],
-            l.center[1],
-            l.center[2],
-            l.radius,
-            l.phase,
-            l.slack,
-        ];
-        if values.iter().any(|v| !v.is_finite()) || l.radius < 0.0 || l.slack < 0.0 {
-            return bad("a locus needs a finite centre and phase, radius >= 0 and slack >= 0");
-        }
-    }
-    if let Dof::SixDof { max_tilt } = params.dof {
-        if !(max_tilt.is_finite() && max_tilt >= 0.0) {
-            return bad("max_tilt must be >= 0");
-        }
-    }
-    Ok(())
-}
-
 /// Evenly spaced voxel centres (at most `max`) of a list, in key order.
 fn centres(list: &OccupancyList, max: usize) -> Vec<Point3<f64>> {
     let sorted = list.sorted();
@@ -169,7 +123,7 @@ pub(crate) fn prepare<'a>(
     target: &'a SearchTarget,
     params: &SearchParams,
 ) -> Result<Problem<'a>> {
-    check(params)?;
+    params.validate()?;
     let pyramid = &target.pyramid;
     // The target alone fixes the finest resolution (`params.resolution` only built it).
     let res = target.resolution();
@@ -296,7 +250,9 @@ pub(crate) fn region_counts(
     let l = &problem.lattice;
     let cell = l.cell(level);
     let dth = l.dtheta(level);
-    let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0) + 1;
+    // Saturating: a window of 1e20 m is refused by its memory estimate, not by an
+    // overflow here.
+    let count = |extent: f64, step: f64| ((extent / step).ceil() as i32).max(0).saturating_add(1);
     let ext = target
         .base()
         .stats()

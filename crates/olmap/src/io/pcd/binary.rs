@@ -224,9 +224,11 @@ pub(super) fn read_compressed<R: BufRead>(
         )));
     }
     let data = lzf::decompress(&buf, uncompressed as usize).map_err(|e| {
+        // The instruction at fault, as a byte of the file (the block starts 8 bytes in).
+        let block = header.data_offset + 8;
         ParseError::at(
-            Location::Byte(header.data_offset + 8),
-            format!("binary_compressed: {e}"),
+            Location::Byte(block + e.position().unwrap_or(0) as u64),
+            format!("binary_compressed: {}", e.what()),
         )
     })?;
     // `points <= uncompressed` (records are at least 3 bytes), so it fits a usize.

@@ -481,9 +481,29 @@ fn parse_viewpoint(line: usize, values: &[&str]) -> Result<[f64; 7], ParseError>
     if values.len() != 7 {
         return Err(err());
     }
-    let mut v = [0.0; 7];
+    let mut v = [0.0f64; 7];
     for (slot, s) in v.iter_mut().zip(values) {
         *slot = s.parse().map_err(|_| err())?;
+    }
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(ParseError::line(
+            line,
+            format!(
+                "VIEWPOINT: expected finite numbers (the sensor pose), found '{}'",
+                shown(&values.join(" "))
+            ),
+        ));
+    }
+    let q_norm = v[3..].iter().map(|x| x * x).sum::<f64>().sqrt();
+    if q_norm <= 1e-6 {
+        return Err(ParseError::line(
+            line,
+            format!(
+                "VIEWPOINT: the rotation quaternion qw qx qy qz is zero ('{}'): not a rotation \
+                 (the identity is 1 0 0 0)",
+                shown(&values[3..].join(" "))
+            ),
+        ));
     }
     Ok(v)
 }

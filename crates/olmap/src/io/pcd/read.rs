@@ -9,6 +9,7 @@ use super::header::{read_header, DataEncoding, Header, Roles};
 use super::{shown, unpack_rgb, Scalar};
 use crate::cloud::PointCloud;
 use crate::error::ParseError;
+use crate::file::text::{read_line_capped, MAX_LINE_BYTES};
 use crate::io::{finite_point, CloudFormat, LoadedCloud, ReadReport};
 
 /// Points reserved up front at most; beyond that the vectors grow as points arrive.
@@ -189,13 +190,30 @@ fn read_ascii<R: BufRead>(
     out: &mut CloudBuilder,
     report: &mut ReadReport,
 ) -> Result<(), ParseError> {
+    // Every value takes a byte and a separator: more values than fit on a line of the
+    // longest length read cannot be ascii data (and would not be worth a token list).
+    let values = header
+        .fields
+        .iter()
+        .try_fold(0u64, |sum, f| sum.checked_add(f.count as u64))
+        .unwrap_or(u64::MAX);
+    if values > MAX_LINE_BYTES / 2 {
+        return Err(ParseError::line(
+            header.data_line,
+            format!(
+                "DATA ascii: COUNT gives {values} values per point, more than a line of {} MiB \
+                 can hold",
+                MAX_LINE_BYTES >> 20
+            ),
+        ));
+    }
     let specs = token_specs(header);
     let mut line = Vec::with_capacity(256);
     let mut line_no = header.data_line;
     let mut found = 0u64;
     while found < header.points {
         line.clear();
-        if reader.read_until(b'\n', &mut line)? == 0 {
+        if read_line_capped(reader, &mut line, line_no + 1)? == 0 {
             return Err(ParseError::Truncated(format!(
                 "ascii data: the header announces {} points, found {found}",
                 header.points

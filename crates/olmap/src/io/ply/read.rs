@@ -7,6 +7,7 @@ use super::header::{parse_header, Element, Encoding, Header, Kind, Scalar};
 use super::vertex::{Builder, Plan, SLOTS};
 use crate::error::ParseError;
 use crate::file::header::clip;
+use crate::file::text::read_line_capped;
 use crate::io::{CloudFormat, LoadedCloud, ReadReport};
 
 /// Reads a PLY point cloud (the `vertex` element) from a stream.
@@ -54,7 +55,7 @@ impl<R: BufRead> Lines<R> {
     fn next_line(&mut self) -> Result<bool, ParseError> {
         loop {
             self.buf.clear();
-            if self.r.read_until(b'\n', &mut self.buf)? == 0 {
+            if read_line_capped(&mut self.r, &mut self.buf, self.line_no + 1)? == 0 {
                 return Ok(false);
             }
             self.line_no += 1;

@@ -82,6 +82,54 @@ pub struct MapParams {
     pub register_band: Option<(f64, f64)>,
 }
 
+impl MapParams {
+    /// Checks every parameter against its documented range ([`Error::InvalidArgument`]
+    /// naming the parameter and the valid range): the registration's search
+    /// ([`crate::align::SearchParams::validate`]) and refinement, the sensor model, the
+    /// odometry window (yaw at most 180°), the bucket radius, the point-map voxel, the
+    /// odometry tolerance and the registration band (`z_min < z_max`).
+    pub fn validate(&self) -> Result<()> {
+        self.register.search.validate()?;
+        if let Some(icp) = &self.register.refine {
+            icp.validate()?;
+        }
+        self.sensor.validate()?;
+        let bad = |what: String| Err(Error::InvalidArgument(format!("map parameters: {what}")));
+        let non_negative = |name: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                bad(format!("{name} must be a finite number >= 0, got {v}"))
+            }
+        };
+        let (xy, z, yaw) = self.odometry_window;
+        non_negative("odometry_window xy (m)", xy)?;
+        non_negative("odometry_window z (m)", z)?;
+        if !(0.0..=std::f64::consts::PI).contains(&yaw) {
+            return bad(format!(
+                "odometry_window yaw must be 0 to 180 degrees, got {} degrees",
+                yaw.to_degrees()
+            ));
+        }
+        non_negative("bucket_radius (m)", self.bucket_radius)?;
+        non_negative("odometry_tolerance (m)", self.odometry_tolerance)?;
+        if !(self.refine_map_voxel.is_finite() && self.refine_map_voxel > 0.0) {
+            return bad(format!(
+                "refine_map_voxel must be a finite number > 0 m, got {}",
+                self.refine_map_voxel
+            ));
+        }
+        if let Some((lo, hi)) = self.register_band {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return bad(format!(
+                    "register_band needs finite heights z_min < z_max, got {lo} .. {hi}"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for MapParams {
     fn default() -> Self {
         MapParams {
@@ -288,6 +336,7 @@ pub fn build_map_linked(
 /// The input errors of [`build_map_linked`]: no scans, team links that do not describe
 /// the scans, a frame scan index out of range.
 fn check_inputs(scans: &[ScanInput], params: &MapParams, team: &TeamLinks) -> Result<()> {
+    params.validate()?;
     if scans.is_empty() {
         return Err(Error::EmptyInput {
             what: "the scans to map".into(),
