@@ -32,10 +32,7 @@ fn truth_between(dataset: &Path, robot: &str, a: &str, b: &str) -> Pose {
 
 fn error(a: &Pose, b: &Pose) -> (f64, f64) {
     let d = a.inverse() * *b;
-    (
-        d.translation().norm(),
-        d.rotation().angle().to_degrees(),
-    )
+    (d.translation().norm(), d.rotation().angle().to_degrees())
 }
 
 #[test]
@@ -44,8 +41,17 @@ fn audit_office_repetitive_pose_not_trusted_wrong() {
     let so = dir.path().join("so");
     let so_s = so.to_str().unwrap();
     ok(&olmap(&[
-        "simulate", "--world", "office", "--robots", "1", "--scans-per-robot", "25", "--seed",
-        "5", "-o", so_s,
+        "simulate",
+        "--world",
+        "office",
+        "--robots",
+        "1",
+        "--scans-per-robot",
+        "25",
+        "--seed",
+        "5",
+        "-o",
+        so_s,
     ]));
     let scans = so.join("robot0").join("scans");
     let source = scans.join("scan020.pcd");
@@ -63,7 +69,9 @@ fn audit_office_repetitive_pose_not_trusted_wrong() {
         .flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
         .collect();
     let found = Pose::from_row_major_3x4(
-        &[m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11]],
+        &[
+            m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11],
+        ],
         1e-6,
     )
     .unwrap();
@@ -77,7 +85,10 @@ fn audit_office_repetitive_pose_not_trusted_wrong() {
     assert!(v["uniqueness"]["search_runner_up_ratio"].is_number());
     assert!(v["uniqueness"]["spread_m"].is_array());
     if v["trusted"].as_bool().unwrap() {
-        assert!(et <= 0.3 && er <= 3.0, "trusted but {et:.2} m and {er:.1}° off");
+        assert!(
+            et <= 0.3 && er <= 3.0,
+            "trusted but {et:.2} m and {er:.1}° off"
+        );
     }
 }
 
@@ -86,8 +97,17 @@ fn audit_office_map_without_odometry_places_no_scan_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let o4 = dir.path().join("o4");
     ok(&olmap(&[
-        "simulate", "--world", "office", "--robots", "4", "--scans-per-robot", "6", "--seed",
-        "11", "-o", o4.to_str().unwrap(),
+        "simulate",
+        "--world",
+        "office",
+        "--robots",
+        "4",
+        "--scans-per-robot",
+        "6",
+        "--seed",
+        "11",
+        "-o",
+        o4.to_str().unwrap(),
     ]));
     let poses = dir.path().join("p.txt");
     let report = dir.path().join("r.json");
@@ -109,6 +129,10 @@ fn audit_office_map_without_odometry_places_no_scan_wrong() {
         let t = first.inverse() * *truth.get(&p.name).unwrap();
         let (et, er) = error(&p.pose, &t);
         eprintln!("{}: {et:.2} m {er:.1}°", p.name);
-        assert!(et <= 0.3 && er <= 3.0, "{} placed {et:.2} m and {er:.1}° off", p.name);
+        assert!(
+            et <= 0.3 && er <= 3.0,
+            "{} placed {et:.2} m and {er:.1}° off",
+            p.name
+        );
     }
 }

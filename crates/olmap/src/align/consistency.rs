@@ -147,9 +147,17 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
 /// an unknown or occupied neighbour below and is not counted as seen through.
 fn deep_free(g: &super::score::DenseGrid, k: VoxelKey) -> bool {
     let (x, y, z) = (k.x as i64, k.y as i64, k.z as i64);
-    [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
-        .iter()
-        .all(|(dx, dy, dz)| g.contains(x + dx, y + dy, z + dz))
+    [
+        (0, 0, 0),
+        (1, 0, 0),
+        (-1, 0, 0),
+        (0, 1, 0),
+        (0, -1, 0),
+        (0, 0, 1),
+        (0, 0, -1),
+    ]
+    .iter()
+    .all(|(dx, dy, dz)| g.contains(x + dx, y + dy, z + dz))
 }
 
 /// How far a pose may be off in angle and still count as agreeing: a voxel at distance `d`
@@ -220,7 +228,11 @@ pub fn consistency_seen(
     let res = target.resolution();
     let mut moved = OccupancyList::new(res)?;
     moved.add_points(source, pose, 1);
-    let source_side = count_side(&surface(&moved), &pose.transform_point(&source.origin()), target);
+    let source_side = count_side(
+        &surface(&moved),
+        &pose.transform_point(&source.origin()),
+        target,
+    );
     let target_side = match (target_points, seen_from_source) {
         (Some(t), Some(seen)) if !t.is_empty() => {
             let mut back = OccupancyList::new(res)?;

@@ -20,8 +20,7 @@ pub mod verify;
 
 pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
 pub use consistency::{
-    consistency, consistency_seen, source_view, Consistency, SideAgreement,
-    MIN_SURFACE_NEIGHBOURS,
+    consistency, consistency_seen, source_view, Consistency, SideAgreement, MIN_SURFACE_NEIGHBOURS,
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
@@ -34,10 +33,10 @@ pub use report::{
     matrix_rows, AgreementJson, AlignmentReport, DegeneracyJson, HypothesisJson, LevelJson,
     Matrix4Rows, RefinementReport, SearchReport, UniquenessReport,
 };
-pub use verdict::TrustThresholds;
 pub use search::{global_search, search};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};
+pub use verdict::TrustThresholds;
 
 use crate::cloud::PointCloud;
 use crate::error::Result;

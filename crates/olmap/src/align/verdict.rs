@@ -100,7 +100,11 @@ impl Default for TrustThresholds {
 }
 
 /// Doubts about a search alone (tests 1-3).
-pub(super) fn search_doubts(search: &Alignment, region: Region, t: &TrustThresholds) -> Vec<String> {
+pub(super) fn search_doubts(
+    search: &Alignment,
+    region: Region,
+    t: &TrustThresholds,
+) -> Vec<String> {
     let mut doubts = Vec::new();
     if search.overlap_fraction < t.min_overlap_fraction {
         doubts.push(format!(
@@ -231,9 +235,8 @@ pub(super) fn window_doubts(start: &Pose, params: &SearchParams) -> Vec<String> 
     };
     // The window's lattice runs from `-half` to the first step at or past `+half` (see
     // the lattice's bounds): its first and last poses are the edge.
-    let on_edge = |d: f64, half: f64, margin: f64| {
-        half > 0.0 && (d <= -half + margin || d >= half - margin)
-    };
+    let on_edge =
+        |d: f64, half: f64, margin: f64| half > 0.0 && (d <= -half + margin || d >= half - margin);
     let eps_t = 0.01 * params.resolution;
     let margin_xy = params.ambiguity_distance.min(0.5 * xy).max(eps_t);
     let d = start.translation() - params.prior.translation();

@@ -169,10 +169,7 @@ pub fn run_trust(
             true_overlap: c.true_overlap,
             overlap_fraction: r.search.overlap_fraction,
             significance: r.search.significance,
-            runner_up_ratio: r
-                .verification
-                .as_ref()
-                .map_or(0.0, |v| v.runner_up_ratio()),
+            runner_up_ratio: r.verification.as_ref().map_or(0.0, |v| v.runner_up_ratio()),
             agreement: r.consistency.map(|c| c.agreement()),
             doubts: r.doubts.clone(),
             seconds: r.seconds,

@@ -16,13 +16,12 @@ use std::sync::Arc;
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
-use super::robot::RobotModel;
 use super::rng::SimRng;
+use super::robot::RobotModel;
 use super::scanners::MirrorScanner;
 use super::world::World;
 use super::worlds::{
-    corridor, desk_hall, floor_only, free_spot, lab, office, symmetric_hall, twin_rooms,
-    two_walls,
+    corridor, desk_hall, floor_only, free_spot, lab, office, symmetric_hall, twin_rooms, two_walls,
 };
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -276,7 +275,13 @@ fn spot(world: &World, rng: &mut SimRng) -> Result<(f64, f64)> {
 }
 
 /// A free spot `lo..hi` metres from `(x, y)` (the first of 200 tries, else any free spot).
-fn spot_near(world: &World, rng: &mut SimRng, at: (f64, f64), lo: f64, hi: f64) -> Result<(f64, f64)> {
+fn spot_near(
+    world: &World,
+    rng: &mut SimRng,
+    at: (f64, f64),
+    lo: f64,
+    hi: f64,
+) -> Result<(f64, f64)> {
     for _ in 0..200 {
         let (r, a) = (rng.range(lo, hi), random_yaw(rng));
         let (x, y) = (at.0 + r * a.cos(), at.1 + r * a.sin());
@@ -289,9 +294,9 @@ fn spot_near(world: &World, rng: &mut SimRng, at: (f64, f64), lo: f64, hi: f64) 
 
 /// Whether `(x, y)` lies inside the world's bounding box (spots near a spot stay indoors).
 fn inside(world: &World, x: f64, y: f64) -> bool {
-    world
-        .bounds()
-        .is_some_and(|b| x > b.min.x + 0.4 && x < b.max.x - 0.4 && y > b.min.y + 0.4 && y < b.max.y - 0.4)
+    world.bounds().is_some_and(|b| {
+        x > b.min.x + 0.4 && x < b.max.x - 0.4 && y > b.min.y + 0.4 && y < b.max.y - 0.4
+    })
 }
 
 /// A drawn pair: the scans, the truth, and where the target was taken (for the alias test).
@@ -316,7 +321,11 @@ fn pair(rig: &Rig, world: &Arc<World>, a: Pose, b: Pose, seed: u64) -> Drawn {
 
 /// Lab or office, by the seed's parity.
 fn furnished(seed: u64) -> Arc<World> {
-    Arc::new(if seed % 2 == 0 { lab(seed) } else { office(seed) })
+    Arc::new(if seed.is_multiple_of(2) {
+        lab(seed)
+    } else {
+        office(seed)
+    })
 }
 
 fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
@@ -400,7 +409,11 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             let world = Arc::new(corridor(seed));
             let x = rng.range(8.0, 32.0);
             let dx = rng.range(1.0, 6.0) * if rng.chance(0.5) { 1.0 } else { -1.0 };
-            let yaw_a = if rng.chance(0.5) { 0.0 } else { std::f64::consts::PI };
+            let yaw_a = if rng.chance(0.5) {
+                0.0
+            } else {
+                std::f64::consts::PI
+            };
             let yaw_b = yaw_a + rng.range(-0.5, 0.5);
             pair(
                 &rig,

@@ -195,7 +195,13 @@ pub(crate) fn finish(
                 score: s.score,
             })
     });
-    let spread = spread_around(&best_pose, scored.iter().take_while(|s| s.score >= cut).map(|s| l.pose(&s.cand, 0)));
+    let spread = spread_around(
+        &best_pose,
+        scored
+            .iter()
+            .take_while(|s| s.score >= cut)
+            .map(|s| l.pose(&s.cand, 0)),
+    );
     let n = problem.scan[0].len() as u64;
     let overlap = best_hits as u64;
     let ambiguity = heads.len().max(1);

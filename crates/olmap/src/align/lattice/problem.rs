@@ -68,7 +68,7 @@ fn level_centres(
             return true;
         }
         seen += 1;
-        (seen - 1) % step == 0
+        (seen - 1).is_multiple_of(step)
     });
     centres(&kept, max)
 }
@@ -88,7 +88,11 @@ pub(crate) fn horizontal_voxels(list: &OccupancyList) -> rustc_hash::FxHashSet<V
             for dx in -1..=1 {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
-                        let nk = match (k.x.checked_add(dx), k.y.checked_add(dy), k.z.checked_add(dz)) {
+                        let nk = match (
+                            k.x.checked_add(dx),
+                            k.y.checked_add(dy),
+                            k.z.checked_add(dz),
+                        ) {
                             (Some(x), Some(y), Some(z)) => VoxelKey::new(x, y, z),
                             _ => continue,
                         };

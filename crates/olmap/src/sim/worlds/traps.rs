@@ -23,7 +23,12 @@ pub fn twin_rooms(seed: u64) -> World {
     let pitch = w + wall;
     let mut o = Objects::default();
     let len = rooms as f64 * pitch - wall;
-    o.structure(room_shell(Point3::origin(), Vector3::new(len, d, h), 0.2, true));
+    o.structure(room_shell(
+        Point3::origin(),
+        Vector3::new(len, d, h),
+        0.2,
+        true,
+    ));
     let door_y = rng.range(1.0, d - 2.2);
     for k in 1..rooms {
         let x = k as f64 * pitch - wall;
@@ -58,7 +63,12 @@ pub fn desk_hall(seed: u64) -> World {
     let mut rng = SimRng::new(seed);
     let (len, width, h) = (24.0, 10.0, 3.0);
     let mut o = Objects::default();
-    o.structure(room_shell(Point3::origin(), Vector3::new(len, width, h), 0.2, true));
+    o.structure(room_shell(
+        Point3::origin(),
+        Vector3::new(len, width, h),
+        0.2,
+        true,
+    ));
     let (dw, dd) = (rng.range(1.4, 1.7), rng.range(0.7, 0.8));
     let pitch = 2.4;
     for row in 0..3 {
@@ -80,7 +90,12 @@ pub fn symmetric_hall(seed: u64) -> World {
     let (len, width, h) = (16.0, 10.0, 3.0);
     let (cx, cy) = (0.5 * len, 0.5 * width);
     let mut o = Objects::default();
-    o.structure(room_shell(Point3::origin(), Vector3::new(len, width, h), 0.2, true));
+    o.structure(room_shell(
+        Point3::origin(),
+        Vector3::new(len, width, h),
+        0.2,
+        true,
+    ));
     let mirror = |x: f64, y: f64| (2.0 * cx - x, 2.0 * cy - y);
     let pillars = [
         (rng.range(3.0, 5.0), rng.range(2.5, 4.0)),
