@@ -457,25 +457,38 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
     })
 }
 
+/// One pair of scans in `world`, `near` metres apart (minimum, maximum) with random
+/// headings, and the source's true overlap with the target.
+fn draw_in_world(
+    rig: &Rig,
+    world: &Arc<World>,
+    seed: u64,
+    rng: &mut SimRng,
+    near: (f64, f64),
+) -> Result<(f64, Drawn)> {
+    let a = spot(world, rng)?;
+    let b = spot_near(world, rng, a, near.0, near.1)?;
+    let p = pair(
+        rig,
+        world,
+        robot_at(a.0, a.1, random_yaw(rng)),
+        robot_at(b.0, b.1, random_yaw(rng)),
+        seed,
+    );
+    let f = match p.truth {
+        Some(t) => overlap_at(&p.source, &p.target, &t)?,
+        None => 0.0,
+    };
+    Ok((f, p))
+}
+
 /// Two scans 0.5-3 m apart in one furnished world that share at least 30 % of the source's
 /// voxels (up to 60 draws; the best otherwise).
 fn same_place(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<Drawn> {
     let world = furnished(seed);
     let mut best: Option<(f64, Drawn)> = None;
     for _ in 0..60 {
-        let a = spot(&world, rng)?;
-        let b = spot_near(&world, rng, a, 0.5, 3.0)?;
-        let p = pair(
-            rig,
-            &world,
-            robot_at(a.0, a.1, random_yaw(rng)),
-            robot_at(b.0, b.1, random_yaw(rng)),
-            seed,
-        );
-        let f = match p.truth {
-            Some(t) => overlap_at(&p.source, &p.target, &t)?,
-            None => 0.0,
-        };
+        let (f, p) = draw_in_world(rig, &world, seed, rng, (0.5, 3.0))?;
         if f >= 0.3 {
             return Ok(p);
         }
@@ -493,19 +506,7 @@ fn low_overlap(rig: &Rig, seed: u64, rng: &mut SimRng) -> Result<Drawn> {
     let world = furnished(seed);
     let mut last = None;
     for _ in 0..60 {
-        let a = spot(&world, rng)?;
-        let b = spot_near(&world, rng, a, 2.0, 9.0)?;
-        let d = pair(
-            rig,
-            &world,
-            robot_at(a.0, a.1, random_yaw(rng)),
-            robot_at(b.0, b.1, random_yaw(rng)),
-            seed,
-        );
-        let f = match d.truth {
-            Some(t) => overlap_at(&d.source, &d.target, &t)?,
-            None => 0.0,
-        };
+        let (f, d) = draw_in_world(rig, &world, seed, rng, (2.0, 9.0))?;
         if (0.05..=0.15).contains(&f) {
             return Ok(d);
         }
