@@ -189,8 +189,8 @@ pub const ANGULAR_TOLERANCE: f64 = std::f64::consts::PI / 180.0;
 /// let target = SearchTarget::from_cloud(&scan, 0.1, 1).unwrap();
 /// let right = consistency(&scan, &target, Some(&scan), &Pose::identity()).unwrap();
 /// assert!(right.agreement() > 0.99);
-/// // Lifted by 0.8 m, the floor hangs in the air the target saw through.
-/// let wrong = Pose::from_xyz_ypr(0.0, 0.0, 0.8, 0.0, 0.0, 0.0);
+/// // Moved 0.8 m into the room, the walls stand in the space the target saw through.
+/// let wrong = Pose::from_xyz_ypr(0.8, 0.8, 0.0, 0.0, 0.0, 0.0);
 /// assert!(consistency(&scan, &target, Some(&scan), &wrong).unwrap().agreement() < 0.8);
 /// ```
 ///

@@ -114,6 +114,12 @@ fn finish(
                 &search,
                 &icp,
                 reach,
+                match params.search.region {
+                    super::Region::Window { .. } => {
+                        Some((&params.search.prior, params.search.ambiguity_distance))
+                    }
+                    _ => None,
+                },
             )?)
         }
         _ => None,

@@ -143,9 +143,20 @@ fn rival_doubt(best: &Pose, rival: &Pose, how: &str, ratio: f64, t: &TrustThresh
     )
 }
 
-/// Doubts about the uniqueness of the verified winner (test 3): a distinct rival (the
-/// search's best included, when the fit overruled it) fits nearly as well.
+/// Doubts about the uniqueness of the verified winner (test 3): a rival whose refined pose
+/// is distinct from the search's best fits the scans better (the overlap and the fit
+/// disagree: one of them is fooled, and which one is not known), or a distinct rival fits
+/// nearly as well.
 pub(super) fn uniqueness_doubts(v: &Verification, t: &TrustThresholds) -> Vec<String> {
+    if v.overruled() {
+        let (w, b) = (v.winner().pose(), v.hypotheses[0].pose());
+        let d = (w.translation() - b.translation()).norm();
+        let a = w.rotation().angle_to(&b.rotation()).to_degrees();
+        return vec![format!(
+            "a rival {d:.2} m and {a:.0}° from the search's best fits the scans better: the \
+             overlap and the fit disagree (the better fit is returned)"
+        )];
+    }
     let ratio = v.runner_up_ratio();
     match v.runner_up {
         Some(i) if ratio > t.max_runner_up_ratio => vec![rival_doubt(

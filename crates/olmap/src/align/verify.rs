@@ -147,7 +147,9 @@ fn starts(search: &Alignment) -> Vec<Candidate> {
 
 /// Refines and scores the search's best and its strong rivals against `target` (the
 /// prepared target, for the agreement) and `points` (the target's points, for ICP),
-/// cropping the points to `reach` metres around each hypothesis' footprint.
+/// cropping the points to `reach` metres around each hypothesis' footprint. With `prior`
+/// (a window search's prior pose and a margin in metres) the distinct runner-up is chosen
+/// among the rivals no farther from the prior than the winner plus the margin.
 pub(super) fn verify(
     source: &PointCloud,
     target: &SearchTarget,
@@ -155,6 +157,7 @@ pub(super) fn verify(
     search: &Alignment,
     icp: &IcpParams,
     reach: f64,
+    prior: Option<(&Pose, f64)>,
 ) -> Result<Verification> {
     let res = target.resolution();
     let seen = if points.is_empty() || source.is_empty() {
@@ -192,8 +195,20 @@ pub(super) fn verify(
         (p.translation() - won.translation()).norm() > DISTINCT_TRANSLATION_CELLS * res
             || p.rotation().angle_to(&won.rotation()) > DISTINCT_ROTATION
     };
+    // With a prior (a window search), a rival counts only when it is about as near the
+    // prior as the winner (within `margin`): the prior makes a look-alike much farther from
+    // it unlikely, and ignoring that refused every scan of a room with rows of desks.
+    let plausible = |p: &Pose| {
+        prior.is_none_or(|(at, margin)| {
+            (p.translation() - at.translation()).norm()
+                <= (won.translation() - at.translation()).norm() + margin
+        })
+    };
     let runner_up = (0..hypotheses.len())
-        .filter(|&i| i != chosen && distinct(&hypotheses[i].pose()))
+        .filter(|&i| {
+            let p = hypotheses[i].pose();
+            i != chosen && distinct(&p) && plausible(&p)
+        })
         .max_by(|&a, &b| {
             hypotheses[a]
                 .fit
