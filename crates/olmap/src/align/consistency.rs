@@ -60,6 +60,10 @@ fn surface(list: &OccupancyList) -> OccupancyList {
     })
 }
 
+/// Upright voxels (of one side) the other scan must observe for [`SideAgreement::agreement`]
+/// to be taken over upright structure alone.
+pub const MIN_UPRIGHT_SEEN: u64 = 100;
+
 /// One side's count: the voxels of one scan against the other's occupancy and free space.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SideAgreement {
@@ -67,19 +71,37 @@ pub struct SideAgreement {
     pub voxels: u64,
     /// Voxels with an occupied voxel of the other scan within one cell.
     pub supported: u64,
-    /// Voxels the other scan saw through (free, and not supported).
+    /// Voxels the other scan saw through (free, and not supported), counted only in
+    /// patches: with at least [`MIN_CONTRADICTED_NEIGHBOURS`] such neighbours.
     pub contradicted: u64,
+    /// Of [`SideAgreement::voxels`], those on upright structure (walls, furniture sides:
+    /// an occupied voxel two layers above or below within one cell sideways), not on a
+    /// floor or ceiling.
+    pub upright: u64,
+    /// Upright voxels supported.
+    pub upright_supported: u64,
+    /// Upright voxels contradicted.
+    pub upright_contradicted: u64,
 }
 
 impl SideAgreement {
-    /// `supported / (supported + contradicted)`, 1 when the other scan observed none of
-    /// these voxels.
+    /// The share of this scan's observed surface that the other supports:
+    /// `supported / (supported + contradicted)` over its upright voxels when the other
+    /// scan observed at least [`MIN_UPRIGHT_SEEN`] of them, else over all its voxels; 1
+    /// when the other observed none. Floors and ceilings are left out because any two
+    /// indoor places share them: with them, unrelated simulated rooms agreed at 0.89-0.97;
+    /// on upright structure alone at 0.75-0.83, while the right real pairs of the data
+    /// folder agree at 0.89-1.00.
     pub fn agreement(&self) -> f64 {
-        let seen = self.supported + self.contradicted;
-        if seen == 0 {
+        let (s, c) = if self.upright_supported + self.upright_contradicted >= MIN_UPRIGHT_SEEN {
+            (self.upright_supported, self.upright_contradicted)
+        } else {
+            (self.supported, self.contradicted)
+        };
+        if s + c == 0 {
             1.0
         } else {
-            self.supported as f64 / seen as f64
+            s as f64 / (s + c) as f64
         }
     }
 
@@ -124,6 +146,7 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         voxels: mine.len() as u64,
         ..Default::default()
     };
+    let mut seen_through = std::collections::HashMap::new();
     for (k, _) in mine.iter() {
         // The level whose cell covers the angular tolerance at this range.
         let d = (mine.center(k) - origin).norm();
@@ -131,14 +154,44 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         let f = 1i32 << level;
         let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
         let occ = other.pyramid().level(level);
+        let up = is_upright(mine, k);
+        side.upright += u64::from(up);
         let near = neighbourhood(kl).any(|n| occ.count(n) > 0);
         if near {
             side.supported += 1;
+            side.upright_supported += u64::from(up);
         } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
+            seen_through.insert(k, up);
+        }
+    }
+    // A contradiction counts only as part of a patch: a wall or a piece of furniture
+    // standing in the other's open space is a patch of voxels, a stray return (noise, a
+    // spurious point, a random outlier) is not and says nothing about the pose.
+    for (k, up) in &seen_through {
+        let patch = neighbourhood(*k)
+            .filter(|n| n != k && seen_through.contains_key(n))
+            .nth(MIN_CONTRADICTED_NEIGHBOURS - 1)
+            .is_some();
+        if patch {
             side.contradicted += 1;
+            side.upright_contradicted += u64::from(*up);
         }
     }
     side
+}
+
+/// Contradicted voxels (of one side) with fewer contradicted neighbours than this are
+/// stray returns and not counted ([`SideAgreement::contradicted`]).
+pub const MIN_CONTRADICTED_NEIGHBOURS: usize = 2;
+
+/// Whether `k` lies on upright structure: an occupied voxel two layers above or below it,
+/// within one cell sideways (a floor or ceiling one or two layers thick has none).
+fn is_upright(list: &OccupancyList, k: VoxelKey) -> bool {
+    [-2, 2].iter().any(|&dz| {
+        (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| list.count(VoxelKey::new(k.x + dx, k.y + dy, k.z + dz)) > 0)
+        })
+    })
 }
 
 /// Whether a cell and its six face neighbours are all free: the free space eroded by one

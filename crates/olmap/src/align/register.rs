@@ -101,7 +101,7 @@ fn finish(
     // A search that already fails its own tests is not refined: ICP cannot make a barely
     // overlapping match trustworthy, and skipping it saves the most expensive part of
     // every hopeless attempt (map building tries many).
-    let mut doubts = search_doubts(&search, params.search.region, &params.trust);
+    let mut doubts = search_doubts(&search, &params.trust);
     let verification = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
         (Some(p), true) => {
             let icp = refinement_after_search(p, resolution);

@@ -61,6 +61,12 @@ pub struct Hypothesis {
 }
 
 impl Hypothesis {
+    /// Surface voxels of either scan that the other saw through at this hypothesis' pose.
+    pub fn contradicted(&self) -> u64 {
+        let t = self.consistency.target.unwrap_or_default();
+        self.consistency.source.contradicted + t.contradicted
+    }
+
     /// The final pose: refined when the refinement converged, else the search's.
     pub fn pose(&self) -> Pose {
         if self.refinement.converged {
@@ -78,7 +84,8 @@ pub struct Verification {
     pub hypotheses: Vec<Hypothesis>,
     /// Index of the winner (the best fit; the earlier on a tie).
     pub chosen: usize,
-    /// Index of the distinct runner-up, if a rival ended outside the winner's basin.
+    /// Index of the distinct runner-up, if a rival ended outside the winner's basin: the
+    /// least refuted one ([`Verification::refutation`]).
     pub runner_up: Option<usize>,
     /// Whether the winner's refined pose is distinct from the search's best's.
     pub distinct_from_best: bool,
@@ -100,6 +107,21 @@ impl Verification {
         }
     }
 
+    /// How strongly the scans refute the distinct runner-up against the winner: the gap
+    /// between their fits in standard deviations of a count,
+    /// `(fit_winner − fit_rival) / sqrt(S_w + S_r + w²·(C_w + C_r))` with `S` the supported
+    /// and `C` the contradicted voxels of both sides and `w` the
+    /// [`CONTRADICTION_WEIGHT`]. Infinite without a distinct runner-up. A rival that leaves
+    /// walls standing where the other scan saw through, or explains much less of the
+    /// overlap, scores high; an alias of a repeated or symmetric place fits as well as the
+    /// winner and scores near zero.
+    pub fn refutation(&self) -> f64 {
+        match self.runner_up {
+            Some(i) => refutation(self.winner(), &self.hypotheses[i]),
+            None => f64::INFINITY,
+        }
+    }
+
     /// Whether the search's best was overruled by a distinct rival: the winner is not the
     /// search's best and its refined pose ended outside the best's basin (a rival that the
     /// refinement brought to the same pose is the same answer).
@@ -113,6 +135,18 @@ pub fn fit(c: &Consistency) -> f64 {
     let t = c.target.unwrap_or_default();
     (c.source.supported + t.supported) as f64
         - CONTRADICTION_WEIGHT * (c.source.contradicted + t.contradicted) as f64
+}
+
+/// [`Verification::refutation`] of `rival` against `winner`.
+fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
+    let counts = |h: &Hypothesis| {
+        let t = h.consistency.target.unwrap_or_default();
+        let s = &h.consistency.source;
+        ((s.supported + t.supported) as f64, h.contradicted() as f64)
+    };
+    let ((sw, cw), (sr, cr)) = (counts(winner), counts(rival));
+    let w2 = CONTRADICTION_WEIGHT * CONTRADICTION_WEIGHT;
+    (winner.fit - rival.fit) / (sw + sr + w2 * (cw + cr) + 1.0).sqrt()
 }
 
 /// The search's best and up to `MAX_HYPOTHESES - 1` distinct rivals scoring at least
@@ -165,7 +199,11 @@ pub(super) fn verify(
     } else {
         Some(source_view(source, target)?)
     };
-    let mut hypotheses = Vec::new();
+    let distinct_poses = |a: &Pose, b: &Pose| {
+        (a.translation() - b.translation()).norm() > DISTINCT_TRANSLATION_CELLS * res
+            || a.rotation().angle_to(&b.rotation()) > DISTINCT_ROTATION
+    };
+    let mut hypotheses: Vec<Hypothesis> = Vec::new();
     for start in starts(search) {
         let near = crop_near(source, points, &start.pose, reach);
         let refinement = refine(source, &near, &start.pose, icp)?;
@@ -174,6 +212,11 @@ pub(super) fn verify(
         } else {
             start.pose
         };
+        // A rival the refinement brought into an earlier hypothesis' basin is that
+        // hypothesis again (the search's lattice saw the shoulder of one peak twice).
+        if hypotheses.iter().any(|h| !distinct_poses(&h.pose(), &at)) {
+            continue;
+        }
         let c = consistency_seen(source, seen.as_ref(), target, Some(&near), &at)?;
         hypotheses.push(Hypothesis {
             start,
@@ -191,10 +234,7 @@ pub(super) fn verify(
         })
         .unwrap_or(0);
     let won = hypotheses[chosen].pose();
-    let distinct = |p: &Pose| {
-        (p.translation() - won.translation()).norm() > DISTINCT_TRANSLATION_CELLS * res
-            || p.rotation().angle_to(&won.rotation()) > DISTINCT_ROTATION
-    };
+    let distinct = |p: &Pose| distinct_poses(p, &won);
     // With a prior (a window search), a rival counts only when it is about as near the
     // prior as the winner (within `margin`): the prior makes a look-alike much farther from
     // it unlikely, and ignoring that refused every scan of a room with rows of desks.
@@ -209,11 +249,11 @@ pub(super) fn verify(
             let p = hypotheses[i].pose();
             i != chosen && distinct(&p) && plausible(&p)
         })
-        .max_by(|&a, &b| {
-            hypotheses[a]
-                .fit
-                .total_cmp(&hypotheses[b].fit)
-                .then(b.cmp(&a))
+        .min_by(|&a, &b| {
+            let w = &hypotheses[chosen];
+            refutation(w, &hypotheses[a])
+                .total_cmp(&refutation(w, &hypotheses[b]))
+                .then(a.cmp(&b))
         });
     let distinct_from_best = distinct(&hypotheses[0].pose());
     Ok(Verification {

@@ -51,7 +51,8 @@ impl State<'_> {
                 windows.push(tolerance / xy);
             }
             params.search.prior = prior;
-            for grow in windows {
+            let last = windows.len() - 1;
+            for (i, grow) in windows.into_iter().enumerate() {
                 params.search.region = Region::Window {
                     xy: xy * grow,
                     z: z * grow,
@@ -59,6 +60,9 @@ impl State<'_> {
                 };
                 let mut r = self.run(s, &params)?;
                 check_odometry(&mut r, &prior, tolerance);
+                if r.trusted {
+                    check_inner_half(&mut r, &prior, xy * grow, i == last);
+                }
                 if r.trusted {
                     return Ok(Found {
                         registration: r,
@@ -114,6 +118,32 @@ impl State<'_> {
             &self.refine_map,
             params,
         )
+    }
+}
+
+/// Distrusts a registration in the outer half of an odometry window (`half` metres in x
+/// and y around `prior`). In a place that repeats (rows of desks), a truth just outside the
+/// window leaves a look-alike one period away as the best inside, refined and verified
+/// without a rival (seen in the demo: a scan trusted 2.6 m from its prediction in a ±3 m
+/// window, 0.52 m off, the truth outside). A match in the inner half has its whole
+/// neighbourhood, and the look-alikes one period away, inside the window; a wider window
+/// searches next, and after the `last` (as wide as the odometry tolerance) the scan waits
+/// for other constraints.
+fn check_inner_half(r: &mut Registration, prior: &Pose, half: f64, last: bool) {
+    let d = r.pose.translation() - prior.translation();
+    if d.x.abs() > 0.5 * half || d.y.abs() > 0.5 * half {
+        r.trusted = false;
+        r.doubts.push(format!(
+            "the match lies in the outer half of its odometry window ({:+.2}, {:+.2} m from the \
+             prediction, window ±{half:.2} m): {}",
+            d.x,
+            d.y,
+            if last {
+                "the odometry is too uncertain to rule out a look-alike beyond it"
+            } else {
+                "a wider window must confirm it"
+            }
+        ));
     }
 }
 
