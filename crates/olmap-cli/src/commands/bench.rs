@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
-use olmap::bench::{BenchOptions, BenchReport, ErrorBench};
+use olmap::bench::{BenchOptions, BenchReport, ErrorBench, Outcome, TrustOptions};
 
 use crate::args::progress;
 
@@ -27,6 +27,18 @@ pub struct BenchArgs {
     /// A 2-core machine varies by 10-30 % from run to run.
     #[arg(long)]
     pub repeat: Option<usize>,
+    /// Run the trust suite instead: simulated pairs built to tempt a registration into a
+    /// confident wrong answer (unrelated places, identical rooms, rows of desks, corridors,
+    /// symmetric halls, floors, two walls, low overlap, pieces, outliers, partial views),
+    /// each verdict judged against the truth (right within 0.3 m and 3°).
+    #[arg(long)]
+    pub trust: bool,
+    /// Trust suite: pairs per kind of scene (12 kinds; default 17, 204 pairs).
+    #[arg(long, default_value_t = 17, requires = "trust")]
+    pub pairs_per_scene: usize,
+    /// Trust suite: the seed of the pairs (default 1).
+    #[arg(long, default_value_t = 1, requires = "trust")]
+    pub seed: u64,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -44,8 +56,65 @@ fn data_dir(a: &BenchArgs) -> Option<PathBuf> {
         .or_else(|| Some(PathBuf::from("../shared/data")))
 }
 
+/// Runs `olmap bench --trust`.
+fn run_trust(a: &BenchArgs) -> anyhow::Result<ExitCode> {
+    if a.pairs_per_scene == 0 {
+        anyhow::bail!("--pairs-per-scene must be at least 1");
+    }
+    let options = TrustOptions {
+        seed: a.seed,
+        per_scene: a.pairs_per_scene,
+        ..Default::default()
+    };
+    let bar = progress(12 * a.pairs_per_scene as u64, "trust suite", a.json);
+    let r = olmap::bench::run_trust(&options, |_, _| bar.inc(1))?;
+    bar.finish_and_clear();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!(
+        "{:<16} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
+        "scene", "answer", "pairs", "trusted", "alias", "WRONG", "untrusted", "right"
+    );
+    for s in &r.scenes {
+        println!(
+            "{:<16} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
+            s.scene,
+            s.answer,
+            s.pairs,
+            s.trusted_right,
+            s.trusted_alias,
+            s.trusted_wrong,
+            s.untrusted,
+            s.right
+        );
+    }
+    println!(
+        "trusted and wrong: {} of {} pairs ({} trusted aliases); unique pairs trusted and right: {} of {}; {:.1} s",
+        r.trusted_wrong,
+        r.rows.len(),
+        r.trusted_alias,
+        r.unique_trusted_right,
+        r.unique_pairs,
+        r.seconds
+    );
+    for row in r.rows.iter().filter(|r| r.outcome == Outcome::TrustedWrong) {
+        println!(
+            "  WRONG {}: {:.2} m, {:.1}° off",
+            row.name,
+            row.error_m.unwrap_or(f64::NAN),
+            row.error_deg.unwrap_or(f64::NAN)
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 /// Runs `olmap bench`.
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
+    if a.trust {
+        return run_trust(a);
+    }
     let count = olmap::limits::thread_count(a.threads);
     if let Some(note) = count.note() {
         eprintln!("warning: --threads: {note}");

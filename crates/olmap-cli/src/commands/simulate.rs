@@ -24,6 +24,12 @@ pub enum WorldArg {
     Corridor,
     /// An empty 8 x 6 x 3 m room.
     BoxRoom,
+    /// Three identical furnished rooms in a row, joined by open doorways (repetition).
+    TwinRooms,
+    /// A 24 x 10 m hall with rows of identical desks (repetition along the rows).
+    DeskHall,
+    /// A 16 x 10 m hall symmetric under a half turn (every view has a twin).
+    SymmetricHall,
 }
 
 /// The 3D scanners.
@@ -112,6 +118,9 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         WorldArg::Lab => WorldKind::Lab,
         WorldArg::Corridor => WorldKind::Corridor,
         WorldArg::BoxRoom => WorldKind::BoxRoom,
+        WorldArg::TwinRooms => WorldKind::TwinRooms,
+        WorldArg::DeskHall => WorldKind::DeskHall,
+        WorldArg::SymmetricHall => WorldKind::SymmetricHall,
     };
     let mut scanner = match a.scanner {
         ScannerArg::Mirror => Scanner3d::Mirror(MirrorScanner::enhanced()),

@@ -131,24 +131,93 @@ fn count_hashed(
     (hits, conflicts)
 }
 
-/// Evaluates the candidates of a level and ranks the ones within `keep_ratio` of the best:
-/// those poses, best first, the best pose's hits, and how many poses were evaluated.
+/// What scoring one level gives.
+pub(super) struct LevelScores {
+    /// The poses within `keep_ratio` of the best, best first.
+    pub(super) passed: Vec<Scored>,
+    /// Up to `hypotheses` distinct poses below the cut, best first (see [`distinct_heads`]).
+    pub(super) heads: Vec<Scored>,
+    /// The best pose's hits.
+    pub(super) best_hits: u32,
+    /// Poses evaluated.
+    pub(super) evaluated: usize,
+}
+
+/// Evaluates the candidates of a level and ranks the ones within `keep_ratio` of the best;
+/// also keeps up to `hypotheses` distinct poses below the cut ([`distinct_heads`]).
 pub(super) fn score_level(
     problem: &Problem,
+    params: &SearchParams,
     cands: &[Cand],
     level: usize,
     keep_ratio: f64,
-) -> (Vec<Scored>, u32, usize) {
+    hypotheses: usize,
+) -> LevelScores {
     let mut scored = evaluate(problem, cands, level);
     let evaluated = scored.len();
     let best = scored.iter().map(|s| s.score).max().unwrap_or(0);
     let cut = threshold(best, keep_ratio);
     // Only the poses that pass are ranked: at the coarsest level they are a few hundred
     // of a few hundred thousand.
-    scored.retain(|s| s.score >= cut);
-    rank(&mut scored);
-    let best_hits = scored.first().map_or(0, |s| s.hits);
-    (scored, best_hits, evaluated)
+    let (mut passed, below): (Vec<Scored>, Vec<Scored>) =
+        scored.drain(..).partition(|s| s.score >= cut);
+    rank(&mut passed);
+    let best_hits = passed.first().map_or(0, |s| s.hits);
+    let heads = match passed.first() {
+        Some(b) if hypotheses > 0 => distinct_heads(problem, params, b, below, level, hypotheses),
+        _ => Vec::new(),
+    };
+    LevelScores {
+        passed,
+        heads,
+        best_hits,
+        evaluated,
+    }
+}
+
+/// How many of a level's best poses below the cut are looked at for distinct hypotheses.
+const HEAD_POOL: usize = 4096;
+
+/// Up to `k` poses of `pool` with a positive score, best first, each farther than the
+/// level's distinctness from `best` and from every earlier one: `ambiguity_distance` or two
+/// cells, `ambiguity_angle` or two angular steps, whichever is larger. Greedy in score
+/// order over the best [`HEAD_POOL`] of the pool.
+fn distinct_heads(
+    problem: &Problem,
+    params: &SearchParams,
+    best: &Scored,
+    mut pool: Vec<Scored>,
+    level: usize,
+    k: usize,
+) -> Vec<Scored> {
+    pool.retain(|s| s.score > 0);
+    if pool.len() > HEAD_POOL {
+        pool.select_nth_unstable_by(HEAD_POOL - 1, |a, b| {
+            b.score.cmp(&a.score).then(a.cand.cmp(&b.cand))
+        });
+        pool.truncate(HEAD_POOL);
+    }
+    rank(&mut pool);
+    let l = &problem.lattice;
+    let dist = params.ambiguity_distance.max(2.0 * l.cell(level));
+    let angle = params.ambiguity_angle.max(2.0 * l.dtheta(level));
+    let far = |a: &crate::geometry::Pose, b: &crate::geometry::Pose| {
+        (a.translation() - b.translation()).norm() > dist
+            || a.rotation().angle_to(&b.rotation()) > angle
+    };
+    let mut taken = vec![l.pose(&best.cand, level)];
+    let mut heads = Vec::new();
+    for s in pool {
+        let p = l.pose(&s.cand, level);
+        if taken.iter().all(|t| far(t, &p)) {
+            taken.push(p);
+            heads.push(s);
+            if heads.len() == k {
+                break;
+            }
+        }
+    }
+    heads
 }
 
 /// Memory per pose of a level, bytes: the candidate (24), its translation in its

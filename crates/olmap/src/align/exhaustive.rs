@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use super::evaluate::{initial_candidates, score_level};
+use super::evaluate::{initial_candidates, score_level, LevelScores};
 use super::lattice::{finish, level_report, no_overlap, prepare, Alignment};
 use super::params::SearchParams;
 use super::target::SearchTarget;
@@ -21,7 +21,12 @@ pub fn exhaustive_search(
     let problem = prepare(source, target, params)?;
     let t = Instant::now();
     let cands = initial_candidates(&problem, params, &target.pyramid, 0)?;
-    let (scored, best_hits, evaluated) = score_level(&problem, &cands, 0, params.keep_ratio);
+    let LevelScores {
+        passed: scored,
+        heads,
+        best_hits,
+        evaluated,
+    } = score_level(&problem, params, &cands, 0, params.keep_ratio, 1);
     let passed = scored.len();
     let reports = vec![level_report(
         &problem, 0, evaluated, passed, passed, best_hits, t,
@@ -29,7 +34,7 @@ pub fn exhaustive_search(
     if best_hits == 0 {
         return Ok(no_overlap(&problem, reports, start));
     }
-    let mut a = finish(&problem, params, &scored, reports, start);
+    let mut a = finish(&problem, params, &scored, &heads, reports, start);
     a.exact = true;
     Ok(a)
 }

@@ -2,6 +2,7 @@
 //! refinement.
 
 mod bnb;
+mod consistency;
 mod evaluate;
 mod exhaustive;
 pub mod icp;
@@ -14,22 +15,29 @@ mod score;
 mod search;
 mod significance;
 mod target;
+pub mod verdict;
+pub mod verify;
 
 pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
+pub use consistency::{
+    consistency, consistency_seen, source_view, Consistency, SideAgreement,
+    MIN_CONTRADICTED_NEIGHBOURS, MIN_SURFACE_NEIGHBOURS, MIN_UPRIGHT_SEEN,
+};
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
     localize, register, register_to, register_to_split, RegisterParams, Registration,
-    TrustThresholds, REFINE_REACH_CELLS,
+    REFINE_REACH_CELLS,
 };
 pub use report::{
-    matrix_rows, AlignmentReport, DegeneracyJson, LevelJson, Matrix4Rows, RefinementReport,
-    SearchReport,
+    matrix_rows, AgreementJson, AlignmentReport, DegeneracyJson, HypothesisJson, LevelJson,
+    Matrix4Rows, RefinementReport, SearchReport, UniquenessReport,
 };
 pub use search::{global_search, search};
 pub use significance::significance;
 pub use target::{SearchTarget, FREE_SPACE_MARGIN};
+pub use verdict::TrustThresholds;
 
 use crate::cloud::PointCloud;
 use crate::error::Result;

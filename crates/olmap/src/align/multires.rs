@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use super::evaluate::{initial_candidates, score_level};
+use super::evaluate::{initial_candidates, score_level, LevelScores};
 use super::lattice::{finish, level_report, no_overlap, prepare, Alignment};
 use super::params::{Region, SearchParams};
 use super::target::SearchTarget;
@@ -52,7 +52,19 @@ pub(super) fn multires_search(
             Region::Locus(_) if level > 0 => params.keep_ratio.min(LOCUS_KEEP_RATIO),
             _ => params.keep_ratio,
         };
-        let (scored, best_hits, evaluated) = score_level(&problem, &cands, level, keep);
+        let LevelScores {
+            passed: scored,
+            heads,
+            best_hits,
+            evaluated,
+        } = score_level(
+            &problem,
+            params,
+            &cands,
+            level,
+            keep,
+            params.distinct_hypotheses,
+        );
         let passed = scored.len();
         if best_hits == 0 {
             reports.push(level_report(&problem, level, evaluated, passed, 0, 0, t));
@@ -62,15 +74,15 @@ pub(super) fn multires_search(
             reports.push(level_report(
                 &problem, level, evaluated, passed, passed, best_hits, t,
             ));
-            return Ok(finish(&problem, params, &scored, reports, start));
+            return Ok(finish(&problem, params, &scored, &heads, reports, start));
         }
         let survivors = passed.min(params.survivor_cap());
         reports.push(level_report(
             &problem, level, evaluated, passed, survivors, best_hits, t,
         ));
         let mut next = Vec::with_capacity(survivors * CHILDREN_PER_SURVIVOR);
-        for s in &scored[..survivors] {
-            problem.lattice.children(&s.cand, &mut next);
+        for s in scored[..survivors].iter().chain(&heads) {
+            problem.lattice.children(&s.cand, level, &mut next);
         }
         next.sort_unstable();
         next.dedup();

@@ -193,12 +193,36 @@ pub struct SearchParams {
     /// angular step `dθ = cell / R` (5.6) (default 30 m, or less when the scan is smaller).
     pub max_range: f64,
     /// Two finest-level survivors farther apart than this (metres, or `ambiguity_angle`)
-    /// count as distinct solutions in [`super::Alignment::ambiguity`] (default 1 m).
+    /// count as distinct solutions in [`super::Alignment::ambiguity`] and as distinct
+    /// hypotheses ([`Self::distinct_hypotheses`]); also the margin a window search's answer
+    /// must keep from the window's edge ([`super::verdict`], test 7) (default 0.5 m: rows
+    /// of desks and shelves repeat every 0.5-2 m, and a coarser value merged a look-alike
+    /// 0.5 m away into the best's cluster).
     pub ambiguity_distance: f64,
-    /// See `ambiguity_distance` (default 10°).
+    /// See `ambiguity_distance` (default 5°).
     pub ambiguity_angle: f64,
+    /// Distinct hypotheses the multi-resolution search carries from every level to the next
+    /// besides the poses within `keep_ratio` (default 8): the best poses of the level that
+    /// lie farther apart than `ambiguity_distance` / `ambiguity_angle` (or two of the level's
+    /// cells or angular steps, when coarser). They cost a few dozen poses per level and let
+    /// the search measure the best *distinct* solution at the finest level
+    /// ([`super::Alignment::runner_up`]), which a coarse level would otherwise drop: a
+    /// place that repeats then shows two solutions of similar score instead of one.
+    pub distinct_hypotheses: usize,
     /// How the poses are explored (default [`SearchMode::MultiResolution`]).
     pub search: SearchMode,
+    /// In a gravity-aligned search ([`Dof::XyYaw`], [`Dof::XyzYaw`]) the scan's voxels on
+    /// horizontal surfaces (floors, ceilings, table tops) are thinned to at most this share
+    /// of the voxels scored at each level (default 1: off; 0.25 made a synthetic hall slide
+    /// 0.42 m, see the stop note of issue 22). A horizontal
+    /// surface says nothing about x, y or heading, and its density, highest under the
+    /// sensor, pulls the overlap towards poses that put one scan's near field on the
+    /// other's: in the simulated office and lab, two scans 0.5-3 m apart that share 30-45 %
+    /// of their voxels scored higher at "the robot did not move" (floor and ceiling hits)
+    /// than at the truth (wall and furniture hits). What is kept still fixes the height.
+    /// Six-degree-of-freedom searches keep every voxel (horizontal surfaces fix roll and
+    /// pitch).
+    pub horizontal_share: f64,
     /// The most work the exact search may do, in voxel bounds (a node bounded over one scan
     /// voxel; default [`super::EXACT_MAX_WORK`]): past it the search stops with
     /// [`crate::Error::TooLarge`] instead of running for hours on a scene where every pose
@@ -260,6 +284,12 @@ impl SearchParams {
         }
         if self.max_scan_voxels == 0 {
             return bad("max_scan_voxels must be at least 1".into());
+        }
+        if !(self.horizontal_share > 0.0 && self.horizontal_share <= 1.0) {
+            return bad(format!(
+                "horizontal_share must be in (0, 1], got {}",
+                self.horizontal_share
+            ));
         }
         if self.exact_max_work == 0 {
             return bad("exact_max_work must be at least 1".into());
@@ -435,9 +465,11 @@ impl Default for SearchParams {
             max_survivors: 0,
             max_scan_voxels: 3000,
             max_range: 30.0,
-            ambiguity_distance: 1.0,
-            ambiguity_angle: 10f64.to_radians(),
+            ambiguity_distance: 0.5,
+            ambiguity_angle: 5f64.to_radians(),
+            distinct_hypotheses: 8,
             search: SearchMode::MultiResolution,
+            horizontal_share: 1.0,
             exact_max_work: super::EXACT_MAX_WORK,
         }
     }

@@ -1,52 +1,23 @@
 //! Registration: the global search, the ICP refinement, and an honest verdict.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
-use super::icp::{refine, IcpParams, IcpResult};
+use super::consistency::Consistency;
+use super::icp::{IcpParams, IcpResult};
 use super::lattice::Alignment;
 use super::search::global_search;
 use super::target::SearchTarget;
+use super::verdict::{
+    agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, window_doubts,
+    TrustThresholds,
+};
+use super::verify::{verify, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
-use crate::geometry::{Aabb, Pose};
+use crate::geometry::Pose;
 use crate::occupancy::OccupancyList;
-
-/// When a registration is trusted. A result is trusted only if every test passes; the
-/// failed ones are listed in [`Registration::doubts`].
-///
-/// The defaults come from the shared real data (README of the data folder): correct
-/// global matches of the 3DTK and car pairs overlap 22-37 % of the scan's voxels at the
-/// finest level, unrelated scenes (car against 3DTK, OctoMap's scan.dat against 3DTK)
-/// 2-4 %. Significance alone is not enough: a scan placed anywhere in a huge sparse map
-/// (the outdoor car scene) scores z > 100 by chance because the search keeps the best of
-/// hundreds of thousands of poses.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrustThresholds {
-    /// Smallest overlap fraction at the finest search level (default 0.10).
-    pub min_overlap_fraction: f64,
-    /// Smallest significance z-score (default 10).
-    pub min_significance: f64,
-    /// Largest ambiguity (distinct solutions; default 1).
-    pub max_ambiguity: usize,
-    /// Smallest ICP inlier fraction (default 0.3).
-    pub min_inlier_fraction: f64,
-    /// Largest move of the refinement away from the search's pose, in finest cells
-    /// (default 3): a larger move means the search's cell was not the refined optimum's.
-    pub max_refine_shift_cells: f64,
-}
-
-impl Default for TrustThresholds {
-    fn default() -> Self {
-        TrustThresholds {
-            min_overlap_fraction: 0.10,
-            min_significance: 10.0,
-            max_ambiguity: 1,
-            min_inlier_fraction: 0.3,
-            max_refine_shift_cells: 3.0,
-        }
-    }
-}
 
 /// Parameters of [`register`] and [`localize`]. The default refines with ICP.
 #[derive(Debug, Clone)]
@@ -78,58 +49,18 @@ pub struct Registration {
     pub search: Alignment,
     /// The refinement's result.
     pub refinement: Option<IcpResult>,
-    /// Whether every trust test passed.
+    /// How the two scans agree where both looked, at the refined pose (computed when the
+    /// refinement ran; see [`super::consistency`]).
+    pub consistency: Option<Consistency>,
+    /// The search's best and strongest rivals, refined and scored ([`super::verify`]);
+    /// `None` when the search failed its own tests or refinement is off.
+    pub verification: Option<Verification>,
+    /// Whether every trust test passed (the rule: [`super::verdict`]).
     pub trusted: bool,
     /// The trust tests that failed, in words.
     pub doubts: Vec<String>,
     /// Wall time of the whole registration, seconds.
     pub seconds: f64,
-}
-
-fn verdict(
-    search: &Alignment,
-    refinement: Option<&IcpResult>,
-    resolution: f64,
-    t: &TrustThresholds,
-) -> Vec<String> {
-    let mut doubts = Vec::new();
-    if search.overlap_fraction < t.min_overlap_fraction {
-        doubts.push(format!(
-            "overlap fraction {:.3} < {:.3}",
-            search.overlap_fraction, t.min_overlap_fraction
-        ));
-    }
-    if search.significance < t.min_significance {
-        doubts.push(format!(
-            "significance {:.1} < {:.1}",
-            search.significance, t.min_significance
-        ));
-    }
-    if search.ambiguity > t.max_ambiguity {
-        doubts.push(format!(
-            "{} distinct solutions score within the keep ratio of the best",
-            search.ambiguity
-        ));
-    }
-    if let Some(r) = refinement {
-        if !r.converged {
-            doubts.push("the refinement did not converge".into());
-        }
-        if r.inlier_fraction < t.min_inlier_fraction {
-            doubts.push(format!(
-                "refinement inlier fraction {:.3} < {:.3}",
-                r.inlier_fraction, t.min_inlier_fraction
-            ));
-        }
-        let shift = (r.pose.translation() - search.pose.translation()).norm();
-        if shift > t.max_refine_shift_cells * resolution {
-            doubts.push(format!(
-                "the refinement moved {shift:.3} m from the search's pose (> {:.0} cells)",
-                t.max_refine_shift_cells
-            ));
-        }
-    }
-    doubts
 }
 
 /// How far, in finest search cells, the refinement after a search looks for
@@ -151,41 +82,73 @@ fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
     p
 }
 
+/// What the refinement and the agreement check work against: the prepared target (its
+/// finest level and free space) and its points (cropped around each hypothesis).
+struct Against<'a> {
+    target: &'a SearchTarget,
+    /// Made only when a hypothesis is refined (a map's voxel centres cost a pass).
+    points: &'a dyn Fn() -> Cow<'a, PointCloud>,
+}
+
 fn finish(
     source: &PointCloud,
-    refine_target: impl FnOnce() -> PointCloud,
+    against: Against<'_>,
     search: Alignment,
-    resolution: f64,
     params: &RegisterParams,
     start: Instant,
 ) -> Result<Registration> {
-    // A search that already fails its own tests is not refined: ICP cannot make an
-    // ambiguous or barely overlapping match trustworthy, and skipping it saves the most
-    // expensive part of every hopeless attempt (map building tries many).
-    let search_doubts = verdict(&search, None, resolution, &params.trust);
-    let refinement = match (
-        &params.refine,
-        search.overlap > 0 && search_doubts.is_empty(),
-    ) {
-        (Some(p), true) => Some(refine(
-            source,
-            &refine_target(),
-            &search.pose,
-            &refinement_after_search(p, resolution),
-        )?),
+    let resolution = against.target.resolution();
+    // A search that already fails its own tests is not refined: ICP cannot make a barely
+    // overlapping match trustworthy, and skipping it saves the most expensive part of
+    // every hopeless attempt (map building tries many).
+    let mut doubts = search_doubts(&search, &params.trust);
+    let verification = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
+        (Some(p), true) => {
+            let icp = refinement_after_search(p, resolution);
+            let reach = icp.max_distance_start;
+            let points = (against.points)();
+            Some(verify(
+                source,
+                against.target,
+                &points,
+                &search,
+                &icp,
+                reach,
+                match params.search.region {
+                    super::Region::Window { .. } => {
+                        Some((&params.search.prior, params.search.ambiguity_distance))
+                    }
+                    _ => None,
+                },
+            )?)
+        }
         _ => None,
     };
-    let pose = match &refinement {
-        Some(r) if r.converged => r.pose,
-        _ => search.pose,
+    let (pose, refinement, consistency) = match &verification {
+        Some(v) => {
+            let w = v.winner();
+            doubts.extend(uniqueness_doubts(v, &params.trust));
+            doubts.extend(refinement_doubts(
+                &w.start,
+                &w.refinement,
+                resolution,
+                params.search.dof,
+                &params.trust,
+            ));
+            doubts.extend(agreement_doubts(&w.consistency, &params.trust));
+            doubts.extend(window_doubts(&w.start.pose, &params.search));
+            (w.pose(), Some(w.refinement.clone()), Some(w.consistency))
+        }
+        None => (search.pose, None, None),
     };
-    let doubts = verdict(&search, refinement.as_ref(), resolution, &params.trust);
     Ok(Registration {
         pose,
         trusted: doubts.is_empty(),
         doubts,
         search,
         refinement,
+        consistency,
+        verification,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -230,27 +193,13 @@ pub fn register_to_split(
     let source = refine_source;
     let start = Instant::now();
     let search = global_search(search_source, target, &params.search)?;
-    let res = target.pyramid().base().resolution();
-    // Refine against the part of the target the source can reach from the search's pose
-    // (a large map is mostly out of reach; ICP's cost grows with its target).
-    let reach = params
-        .refine
-        .as_ref()
-        .map_or(0.0, |p| refinement_after_search(p, res).max_distance_start);
-    let crop = |pose: &Pose| {
-        let b = source.transformed(pose).bounding_box()?;
-        let m = nalgebra::Vector3::repeat(reach);
-        Some(Aabb::new(b.min - m, b.max + m))
-    };
-    let reachable = crop(&search.pose);
     finish(
         source,
-        || match reachable {
-            Some(b) => refine_target.crop_box(&b),
-            None => refine_target.clone(),
+        Against {
+            target,
+            points: &|| Cow::Borrowed(refine_target),
         },
         search,
-        res,
         params,
         start,
     )
@@ -279,9 +228,11 @@ pub fn localize(
     let search = global_search(source, &target, &search_params)?;
     finish(
         source,
-        || map.to_cloud(),
+        Against {
+            target: &target,
+            points: &|| Cow::Owned(map.to_cloud()),
+        },
         search,
-        map.resolution(),
         params,
         start,
     )

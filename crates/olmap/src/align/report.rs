@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::icp::IcpResult;
 use super::{LevelReport, Registration};
-use crate::geometry::Pose;
+use crate::geometry::{Pose, PoseJson};
 
 /// A row-major 4x4 homogeneous matrix.
 pub type Matrix4Rows = [[f64; 4]; 4];
@@ -39,6 +39,11 @@ pub struct AlignmentReport {
     pub significance: f64,
     /// Distinct near-best solutions.
     pub ambiguity: usize,
+    /// How unique the answer is: the best distinct rival of the search and of the
+    /// verification, and the spread of near-best poses.
+    pub uniqueness: UniquenessReport,
+    /// How well the two scans agree at the final pose where both looked (when refined).
+    pub agreement: Option<AgreementJson>,
     /// Whether every test of the verdict passed.
     pub trusted: bool,
     /// The failed tests, in words.
@@ -49,6 +54,52 @@ pub struct AlignmentReport {
     pub refinement: Option<RefinementReport>,
     /// Wall time of the whole registration, seconds.
     pub seconds: f64,
+}
+
+/// The uniqueness part of an [`AlignmentReport`] ([`super::verify`], [`super::verdict`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UniquenessReport {
+    /// The search's best distinct solution's score over the best's (0 without one).
+    pub search_runner_up_ratio: f64,
+    /// The search's best distinct solution, when there is one.
+    pub search_runner_up: Option<PoseJson>,
+    /// Half the range of near-best poses around the best along x, y, z (metres).
+    pub spread_m: [f64; 3],
+    /// The same along the heading, degrees.
+    pub spread_yaw_deg: f64,
+    /// The hypotheses refined and compared by fit (the search's best first), when the
+    /// search passed its tests.
+    pub hypotheses: Vec<HypothesisJson>,
+    /// Index of the chosen hypothesis in `hypotheses`.
+    pub chosen: Option<usize>,
+    /// The best distinct refined rival's fit over the chosen one's (0 without one).
+    pub verified_runner_up_ratio: f64,
+}
+
+/// One refined hypothesis ([`super::verify::Hypothesis`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HypothesisJson {
+    /// Its final pose (refined when the refinement converged).
+    pub pose: PoseJson,
+    /// Its search score.
+    pub search_score: i64,
+    /// Whether its refinement converged.
+    pub converged: bool,
+    /// Its fit: supported minus weighted contradicted surface voxels of both scans.
+    pub fit: f64,
+    /// The smaller of the two scans' agreements at its pose.
+    pub agreement: f64,
+}
+
+/// The agreement of two scans where both looked ([`super::consistency`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AgreementJson {
+    /// Share of the scan's observed surface voxels supported by the target.
+    pub source: f64,
+    /// Share of the target's observed surface voxels supported by the scan (when known).
+    pub target: Option<f64>,
+    /// The smaller of the two (what the verdict tests).
+    pub agreement: f64,
 }
 
 /// The search part of an [`AlignmentReport`].
@@ -176,6 +227,34 @@ impl AlignmentReport {
             overlap_fraction: s.overlap_fraction,
             significance: s.significance,
             ambiguity: s.ambiguity,
+            uniqueness: UniquenessReport {
+                search_runner_up_ratio: s.runner_up_ratio(),
+                search_runner_up: s.runner_up.as_ref().map(|c| PoseJson::from(&c.pose)),
+                spread_m: [s.spread[0], s.spread[1], s.spread[2]],
+                spread_yaw_deg: s.spread[3].to_degrees(),
+                hypotheses: r.verification.as_ref().map_or_else(Vec::new, |v| {
+                    v.hypotheses
+                        .iter()
+                        .map(|h| HypothesisJson {
+                            pose: PoseJson::from(&h.pose()),
+                            search_score: h.start.score,
+                            converged: h.refinement.converged,
+                            fit: h.fit,
+                            agreement: h.consistency.agreement(),
+                        })
+                        .collect()
+                }),
+                chosen: r.verification.as_ref().map(|v| v.chosen),
+                verified_runner_up_ratio: r
+                    .verification
+                    .as_ref()
+                    .map_or(0.0, |v| v.runner_up_ratio()),
+            },
+            agreement: r.consistency.as_ref().map(|c| AgreementJson {
+                source: c.source.agreement(),
+                target: c.target.map(|t| t.agreement()),
+                agreement: c.agreement(),
+            }),
             trusted: r.trusted,
             doubts: r.doubts.clone(),
             search: SearchReport {

@@ -5,6 +5,12 @@
 //! Built with the `test-support` feature (it uses [`crate::fixtures`] and the simulator).
 
 mod measures;
+mod trust;
+
+pub use trust::{
+    run_trust, Outcome, TrustOptions, TrustReport, TrustRow, TrustSceneRow, TRUST_REPORT_FORMAT,
+    TRUST_REPORT_VERSION,
+};
 
 use std::path::PathBuf;
 

@@ -14,6 +14,7 @@ mod scanners;
 mod shape;
 mod sighting;
 mod to_store;
+mod trust_suite;
 mod world;
 mod worlds;
 
@@ -31,5 +32,11 @@ pub use scanners::{
 };
 pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
 pub use sighting::{sightings_at, Sighting, SightingModel};
+pub use trust_suite::{
+    pose_error, trust_cases, Answer, TrustCase, TrustScene, RIGHT_ROTATION, RIGHT_TRANSLATION,
+};
 pub use world::{room_shell, World};
-pub use worlds::{box_room, corridor, free_spot, lab, office, WorldKind};
+pub use worlds::{
+    box_room, corridor, desk_hall, floor_only, free_spot, lab, office, symmetric_hall, twin_rooms,
+    two_walls, WorldKind,
+};

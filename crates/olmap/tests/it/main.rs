@@ -26,6 +26,7 @@ mod sim_scanners;
 mod sim_world;
 mod team;
 mod team_store;
+mod trust;
 
 use std::path::PathBuf;
 

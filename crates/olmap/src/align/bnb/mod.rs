@@ -159,7 +159,7 @@ pub(super) fn exact_search(
         })
         .collect();
     let mut a = match found.first() {
-        Some(s) if s.hits > 0 => finish(&problem, params, &found, reports, start),
+        Some(s) if s.hits > 0 => finish(&problem, params, &found, &[], reports, start),
         _ => no_overlap(&problem, reports, start),
     };
     a.exact = true;

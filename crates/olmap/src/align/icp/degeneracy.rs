@@ -13,6 +13,11 @@ const AXIS_NAMES: [&str; 6] = [
     "translation along z",
 ];
 
+/// The smallest eigenvalue of the strongest horizontal direction for it to be the reference
+/// of [`Degeneracy::free_searched_axes`]: one thousandth of the inliers' squared normal
+/// components lying in the horizontal plane.
+pub const MIN_HORIZONTAL: f64 = 1e-3;
+
 /// How well the final alignment constrains each of the six degrees of freedom.
 ///
 /// From the unweighted point-to-plane information matrix `(1/N) Σ J Jᵀ` over the `N` inliers
@@ -34,6 +39,9 @@ pub struct Degeneracy {
     /// weakest first, each named by its dominant component and that component's magnitude,
     /// e.g. `"translation along x (0.98)"`.
     pub weak: Vec<String>,
+    /// The fraction of the largest eigenvalue below which a direction is weak (the
+    /// [`super::IcpParams::weak_fraction`] in force).
+    pub weak_fraction: f64,
 }
 
 impl Degeneracy {
@@ -48,7 +56,56 @@ impl Degeneracy {
             eigenvectors,
             condition: f64::INFINITY,
             weak: AXIS_NAMES.iter().map(|n| format!("{n} (1.00)")).collect(),
+            weak_fraction: 1.0,
         }
+    }
+
+    /// The names of the coordinate axes (`"translation along x"`, ...) that weak directions
+    /// leave free, among those `searched` (`(ωx, ωy, ωz, vx, vy, vz)`): a weak direction
+    /// counts when most of it (squared components summing to at least one half) lies on
+    /// searched axes, and is named by its largest searched component. Each name once.
+    ///
+    /// "Weak" is measured against the strongest *horizontal* direction (one dominated by
+    /// the heading or a horizontal translation), not against the strongest of all: the
+    /// floor and ceiling of an indoor scan make height, roll and pitch dozens of times
+    /// stronger than anything horizontal, and measured against them every room looked like
+    /// a corridor (a simulated lab with most inliers on its floor was refused for "y
+    /// unconstrained"). With no horizontal direction stronger than [`MIN_HORIZONTAL`]
+    /// (a floor alone), every searched horizontal axis is free.
+    pub fn free_searched_axes(&self, searched: [bool; 6]) -> Vec<&'static str> {
+        let dominant = |v: &[f64; 6]| {
+            (0..6)
+                .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+                .unwrap_or(0)
+        };
+        let horizontal = (0..6)
+            .filter(|&k| (2..=4).contains(&dominant(&self.eigenvectors[k])))
+            .map(|k| self.eigenvalues[k])
+            .fold(0.0, f64::max);
+        let max = if horizontal >= MIN_HORIZONTAL {
+            horizontal
+        } else {
+            self.eigenvalues[5]
+        };
+        let mut out: Vec<&'static str> = Vec::new();
+        for k in 0..6 {
+            if !(self.eigenvalues[k] < self.weak_fraction * max || max <= 0.0) {
+                continue;
+            }
+            let v = &self.eigenvectors[k];
+            let on_searched: f64 = (0..6).filter(|&j| searched[j]).map(|j| v[j] * v[j]).sum();
+            if on_searched < 0.5 {
+                continue;
+            }
+            let j = (0..6)
+                .filter(|&j| searched[j])
+                .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+                .unwrap_or(0);
+            if !out.contains(&AXIS_NAMES[j]) {
+                out.push(AXIS_NAMES[j]);
+            }
+        }
+        out
     }
 
     /// Eigen-decomposition of a normalised information matrix.
@@ -87,6 +144,7 @@ impl Degeneracy {
             eigenvectors,
             condition,
             weak,
+            weak_fraction,
         }
     }
 }

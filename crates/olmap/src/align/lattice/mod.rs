@@ -37,6 +37,12 @@ pub(crate) struct Lattice {
     pub(crate) range: f64,
     pub(crate) searched_t: [bool; 3],
     pub(crate) searched_r: [bool; 3],
+    /// A window's extent from `t0` along x, y, z and from `angle0` along each angle (`None`
+    /// for an angle that wraps or a region without bounds): children of a level that fall
+    /// a whole step outside it are not searched, so that the window means
+    /// what it says (without it the resampling of an edge pose creeps outwards by almost
+    /// one coarse cell).
+    pub(crate) bounds: Option<([f64; 3], [Option<f64>; 3])>,
 }
 
 impl Lattice {
@@ -60,8 +66,25 @@ impl Lattice {
         Pose::from_xyz_ypr(t.x, t.y, t.z, yaw, pitch, roll)
     }
 
-    /// Algorithm 6: the poses around `c` at the next finer level.
-    pub(crate) fn children(&self, c: &Cand, out: &mut Vec<Cand>) {
+    /// Whether `c` at `level` lies within the window (less than one step outside it).
+    fn in_bounds(&self, c: &Cand, level: usize) -> bool {
+        let Some((t, r)) = &self.bounds else {
+            return true;
+        };
+        let cell = self.cell(level);
+        let dth = self.dtheta(level);
+        let inside = |i: i32, step: f64, extent: f64| {
+            let v = i as f64 * step;
+            v > -step && v < extent + step
+        };
+        (0..3).all(|a| inside(c.t[a], cell, t[a]))
+            && (0..3).all(|a| r[a].is_none_or(|e| inside(c.r[a], dth, e)))
+    }
+
+    /// Algorithm 6: the poses around `c` at the next finer level (`c` is at `level`;
+    /// children outside the window are left out).
+    pub(crate) fn children(&self, c: &Cand, level: usize, out: &mut Vec<Cand>) {
+        let before = out.len();
         let span = |searched: bool| if searched { -1..=1 } else { 0..=0 };
         for a in span(self.searched_r[0]) {
             for b in span(self.searched_r[1]) {
@@ -78,6 +101,16 @@ impl Lattice {
                     }
                 }
             }
+        }
+        if self.bounds.is_some() && level > 0 {
+            let mut k = before;
+            for i in before..out.len() {
+                if self.in_bounds(&out[i], level - 1) {
+                    out[k] = out[i];
+                    k += 1;
+                }
+            }
+            out.truncate(k);
         }
     }
 }

@@ -15,6 +15,8 @@ pub struct Candidate {
     pub pose: Pose,
     /// Overlap (voxels) at the finest level.
     pub overlap: u64,
+    /// Ranking score at the finest level (see [`Alignment::score`]).
+    pub score: i64,
 }
 
 /// What one level of the search did.
@@ -63,6 +65,21 @@ pub struct Alignment {
     pub ambiguity: usize,
     /// The best few poses (one per cluster, best first).
     pub candidates: Vec<Candidate>,
+    /// The best solution *distinct* from the best (farther than `ambiguity_distance` or
+    /// `ambiguity_angle`: beyond the refinement's reach), whatever its score; `None` when no
+    /// distinct pose with a positive score was scored at the finest level. The
+    /// multi-resolution search carries the best few distinct hypotheses of every level down
+    /// to the finest (see [`crate::align::SearchParams::distinct_hypotheses`]), so the
+    /// runner-up is measured even when it falls below `keep_ratio` of the best; the exact
+    /// search only knows the runner-ups within `keep_ratio`.
+    pub runner_up: Option<Candidate>,
+    /// Half the range, along target x, y, z (metres) and heading (radians), of the
+    /// finest-level poses scoring at least `keep_ratio` of the best, around the best: how far
+    /// near-best solutions spread along each axis (a corridor spreads along its length).
+    pub spread: [f64; 4],
+    /// Scan voxels at the finest level that land where the target saw through (0 when the
+    /// target knows no free space): `2 * overlap - score`.
+    pub conflicts: u64,
     /// Per-level counts and timings, coarsest first.
     pub levels: Vec<LevelReport>,
     /// Whether the survivor cap cut a level.
@@ -81,6 +98,17 @@ pub struct Alignment {
     /// search's heading index past `2π / dθ`), and there score a little higher than the
     /// exact optimum.
     pub exact: bool,
+}
+
+impl Alignment {
+    /// The runner-up's score as a fraction of the best's ([`Alignment::runner_up`]; 0 when
+    /// there is none or the best does not score above 0).
+    pub fn runner_up_ratio(&self) -> f64 {
+        match &self.runner_up {
+            Some(u) if self.score > 0 => (u.score as f64 / self.score as f64).max(0.0),
+            _ => 0.0,
+        }
+    }
 }
 
 /// A scored pose.
@@ -112,10 +140,21 @@ fn angle_between(a: &Pose, b: &Pose) -> f64 {
     (a.rotation().inverse() * b.rotation()).angle()
 }
 
+/// Whether two poses are distinct solutions: farther apart than `ambiguity_distance` or
+/// `ambiguity_angle`.
+pub(crate) fn distinct(a: &Pose, b: &Pose, params: &SearchParams) -> bool {
+    (a.translation() - b.translation()).norm() > params.ambiguity_distance
+        || angle_between(a, b) > params.ambiguity_angle
+}
+
+/// The finished search: `scored` holds the finest-level poses within `keep_ratio` of the
+/// best, ranked; `others` any further finest-level poses scored (in any order), where the
+/// runner-up is looked for too.
 pub(crate) fn finish(
     problem: &Problem,
     params: &SearchParams,
     scored: &[Scored],
+    others: &[Scored],
     levels: Vec<LevelReport>,
     start: Instant,
 ) -> Alignment {
@@ -138,17 +177,40 @@ pub(crate) fn finish(
             heads.push(Candidate {
                 pose,
                 overlap: s.hits as u64,
+                score: s.score,
             });
         }
     }
+    let best_pose = l.pose(&best, 0);
+    let runner_up = heads.get(1).copied().or_else(|| {
+        others
+            .iter()
+            .filter(|s| s.score > 0)
+            .map(|s| (s, l.pose(&s.cand, 0)))
+            .filter(|(_, p)| distinct(p, &best_pose, params))
+            .max_by(|(a, _), (b, _)| a.score.cmp(&b.score).then(b.cand.cmp(&a.cand)))
+            .map(|(s, pose)| Candidate {
+                pose,
+                overlap: s.hits as u64,
+                score: s.score,
+            })
+    });
+    let spread = spread_around(
+        &best_pose,
+        scored
+            .iter()
+            .take_while(|s| s.score >= cut)
+            .map(|s| l.pose(&s.cand, 0)),
+    );
     let n = problem.scan[0].len() as u64;
     let overlap = best_hits as u64;
     let ambiguity = heads.len().max(1);
     heads.truncate(MAX_CANDIDATES);
     if heads.is_empty() {
         heads.push(Candidate {
-            pose: l.pose(&best, 0),
+            pose: best_pose,
             overlap,
+            score: best_score,
         });
     }
     let evaluated = levels.iter().map(|r| r.evaluated).sum();
@@ -166,12 +228,35 @@ pub(crate) fn finish(
         significance: significance(overlap, n, problem.map_voxels, problem.map_cells),
         ambiguity,
         candidates: heads,
+        runner_up,
+        spread,
+        conflicts: (2 * best_hits as i64 - best_score).max(0) as u64,
         levels,
         guard_acted,
         evaluated,
         seconds: start.elapsed().as_secs_f64(),
         exact: false,
     }
+}
+
+/// Half the range of `poses` around `best` along x, y, z and heading.
+fn spread_around(best: &Pose, poses: impl Iterator<Item = Pose>) -> [f64; 4] {
+    let mut out = [0.0f64; 4];
+    let (yaw0, _, _) = best.yaw_pitch_roll();
+    let t0 = best.translation();
+    let (mut lo, mut hi) = ([0.0f64; 4], [0.0f64; 4]);
+    for p in poses {
+        let d = p.translation() - t0;
+        let dyaw = crate::geometry::wrap_angle(p.yaw_pitch_roll().0 - yaw0);
+        for (i, v) in [d.x, d.y, d.z, dyaw].into_iter().enumerate() {
+            lo[i] = lo[i].min(v);
+            hi[i] = hi[i].max(v);
+        }
+    }
+    for i in 0..4 {
+        out[i] = 0.5 * (hi[i] - lo[i]);
+    }
+    out
 }
 
 pub(crate) fn level_report(
@@ -207,6 +292,9 @@ pub(crate) fn no_overlap(problem: &Problem, levels: Vec<LevelReport>, start: Ins
         significance: 0.0,
         ambiguity: 0,
         candidates: Vec::new(),
+        runner_up: None,
+        spread: [0.0; 4],
+        conflicts: 0,
         levels,
         guard_acted: false,
         evaluated,

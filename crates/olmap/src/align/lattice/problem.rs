@@ -13,6 +13,7 @@ use crate::align::score::RowGrid;
 use crate::align::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
+use crate::geometry::VoxelKey;
 use crate::occupancy::{OccupancyList, Pyramid};
 
 /// The scan and the target prepared for searching.
@@ -44,6 +45,83 @@ fn centres(list: &OccupancyList, max: usize) -> Vec<Point3<f64>> {
         .collect()
 }
 
+/// The scan voxels one level scores: `list`'s voxels with those on horizontal surfaces
+/// (`horizontal`, keys at this level) thinned evenly, in key order, to at most `share` of
+/// the result, then at most `max` centres ([`centres`]).
+fn level_centres(
+    list: &OccupancyList,
+    horizontal: &rustc_hash::FxHashSet<VoxelKey>,
+    share: f64,
+    max: usize,
+) -> Vec<Point3<f64>> {
+    if share >= 1.0 || horizontal.is_empty() {
+        return centres(list, max);
+    }
+    let flat = list.iter().filter(|(k, _)| horizontal.contains(k)).count();
+    let other = list.len() - flat;
+    // Keep h of the flat voxels: h <= share * (other + h).
+    let keep = ((share / (1.0 - share)) * other as f64).floor().max(1.0) as usize;
+    let step = flat.div_ceil(keep.max(1)).max(1);
+    let mut seen = 0usize;
+    let kept = list.filtered(|k, _| {
+        if !horizontal.contains(&k) {
+            return true;
+        }
+        seen += 1;
+        (seen - 1).is_multiple_of(step)
+    });
+    centres(&kept, max)
+}
+
+/// The voxels of `list` that lie on a horizontal surface: the principal axes of the
+/// occupied voxel centres in the 3 x 3 x 3 neighbourhood (at least 5 of them) have their
+/// smallest spread along a direction within about 25° of vertical (`|n_z| > 0.9`), and
+/// the surface is flat (smallest eigenvalue under half the middle one: a surface two voxels
+/// thick, as noise makes a floor on a cell boundary, still counts).
+pub(crate) fn horizontal_voxels(list: &OccupancyList) -> rustc_hash::FxHashSet<VoxelKey> {
+    let sorted = list.sorted();
+    sorted
+        .into_iter()
+        .filter(|(k, _)| {
+            let mut pts = [Vector3::zeros(); 27];
+            let mut n = 0;
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let nk = match (
+                            k.x.checked_add(dx),
+                            k.y.checked_add(dy),
+                            k.z.checked_add(dz),
+                        ) {
+                            (Some(x), Some(y), Some(z)) => VoxelKey::new(x, y, z),
+                            _ => continue,
+                        };
+                        if list.count(nk) > 0 {
+                            pts[n] = Vector3::new(dx as f64, dy as f64, dz as f64);
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            if n < 5 {
+                return false;
+            }
+            let mean = pts[..n].iter().sum::<Vector3<f64>>() / n as f64;
+            let mut cov = nalgebra::Matrix3::zeros();
+            for p in &pts[..n] {
+                let d = p - mean;
+                cov += d * d.transpose();
+            }
+            let e = nalgebra::SymmetricEigen::new(cov);
+            let mut order = [0usize, 1, 2];
+            order.sort_by(|&a, &b| e.eigenvalues[a].total_cmp(&e.eigenvalues[b]));
+            let normal = e.eigenvectors.column(order[0]);
+            normal[2].abs() > 0.9 && e.eigenvalues[order[0]] < 0.5 * e.eigenvalues[order[1]]
+        })
+        .map(|(k, _)| k)
+        .collect()
+}
+
 pub(crate) fn prepare<'a>(
     source: &PointCloud,
     target: &'a SearchTarget,
@@ -70,11 +148,34 @@ pub(crate) fn prepare<'a>(
             what: "the target".into(),
         })?;
     let base_scan = OccupancyList::from_cloud(&scan_cloud, res)?;
-    let mut scan = Vec::with_capacity(pyramid.levels());
-    for level in 0..pyramid.levels() {
-        let l = base_scan.downsample(1 << level)?;
-        scan.push(centres(&l, params.max_scan_voxels));
+    // Gravity-aligned searches thin the horizontal surfaces (`horizontal_share`), each
+    // level judged at its own resolution; a finest voxel also counts as horizontal when its
+    // parent does (far from the sensor a floor's returns are too sparse at the finest
+    // level to show their plane).
+    let thin = params.horizontal_share < 1.0 && !matches!(params.dof, Dof::SixDof { .. });
+    let lists: Vec<OccupancyList> = (0..pyramid.levels())
+        .map(|level| base_scan.downsample(1 << level))
+        .collect::<Result<_>>()?;
+    let mut flat: Vec<rustc_hash::FxHashSet<VoxelKey>> = if thin {
+        lists.iter().map(horizontal_voxels).collect()
+    } else {
+        vec![Default::default(); lists.len()]
+    };
+    if thin && lists.len() > 1 {
+        let parents = std::mem::take(&mut flat[1]);
+        for (k, _) in lists[0].iter() {
+            let up = VoxelKey::new(k.x.div_euclid(2), k.y.div_euclid(2), k.z.div_euclid(2));
+            if parents.contains(&up) {
+                flat[0].insert(k);
+            }
+        }
+        flat[1] = parents;
     }
+    let scan: Vec<Vec<Point3<f64>>> = lists
+        .iter()
+        .zip(&flat)
+        .map(|(l, f)| level_centres(l, f, params.horizontal_share, params.max_scan_voxels))
+        .collect();
     let reach = scan_cloud.stats().range.map_or(params.max_range, |r| r.max);
     let range = reach.clamp(res, params.max_range);
     let prior = &params.prior;
@@ -114,6 +215,20 @@ pub(crate) fn prepare<'a>(
         range,
         searched_t: [true, true, search_z],
         searched_r: [true, tilt.is_some(), tilt.is_some()],
+        bounds: match params.region {
+            Region::Window { xy, z, yaw } => {
+                let tilt_extent = tilt.map(|t| 2.0 * t);
+                Some((
+                    [2.0 * xy, 2.0 * xy, if search_z { 2.0 * z } else { 0.0 }],
+                    [
+                        (yaw < std::f64::consts::PI).then_some(2.0 * yaw),
+                        tilt_extent,
+                        tilt_extent,
+                    ],
+                ))
+            }
+            _ => None,
+        },
     };
     let e = bbox.extent();
     Ok(Problem {

@@ -1,5 +1,7 @@
 //! Built-in indoor worlds: an empty box room, a furnished lab (thesis §6.5), an office floor
-//! with a stairwell shaft, and a featureless corridor. Every generator is deterministic in
+//! with a stairwell shaft, a featureless corridor, and worlds built to break a verdict
+//! ([`traps`]: identical rooms, rows of identical desks, a symmetric hall, a bare floor, two
+//! walls). Every generator is deterministic in
 //! its seed (through [`SimRng`]), so a dataset is reproducible from its world name and seed.
 //!
 //! Static objects all carry id 0; structure (floors, walls, ceilings, pillars, stairs) uses
@@ -14,6 +16,10 @@ use nalgebra::{Point3, Vector3};
 use super::rng::SimRng;
 use super::shape::{Material, Object, Shape};
 use super::world::{room_shell, World};
+
+mod traps;
+
+pub use traps::{desk_hall, floor_only, symmetric_hall, twin_rooms, two_walls};
 
 /// Height band a ground robot occupies: what [`free_spot`] keeps clear of.
 const ROBOT_BAND: (f64, f64) = (0.05, 1.0);
@@ -42,24 +48,37 @@ pub enum WorldKind {
     Corridor,
     /// [`box_room`] of 8 x 6 x 3 m.
     BoxRoom,
+    /// [`twin_rooms`]: three identical furnished rooms in a row.
+    TwinRooms,
+    /// [`desk_hall`]: a hall with rows of identical desks.
+    DeskHall,
+    /// [`symmetric_hall`]: a hall symmetric under a half turn.
+    SymmetricHall,
 }
 
 impl WorldKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [WorldKind; 4] = [
+    pub const ALL: [WorldKind; 7] = [
         WorldKind::Office,
         WorldKind::Lab,
         WorldKind::Corridor,
         WorldKind::BoxRoom,
+        WorldKind::TwinRooms,
+        WorldKind::DeskHall,
+        WorldKind::SymmetricHall,
     ];
 
-    /// The lower-case name ("office", "lab", "corridor", "box-room").
+    /// The lower-case name ("office", "lab", "corridor", "box-room", "twin-rooms",
+    /// "desk-hall", "symmetric-hall").
     pub fn name(self) -> &'static str {
         match self {
             WorldKind::Office => "office",
             WorldKind::Lab => "lab",
             WorldKind::Corridor => "corridor",
             WorldKind::BoxRoom => "box-room",
+            WorldKind::TwinRooms => "twin-rooms",
+            WorldKind::DeskHall => "desk-hall",
+            WorldKind::SymmetricHall => "symmetric-hall",
         }
     }
 
@@ -70,6 +89,9 @@ impl WorldKind {
             WorldKind::Lab => lab(seed),
             WorldKind::Corridor => corridor(seed),
             WorldKind::BoxRoom => box_room(Vector3::new(8.0, 6.0, 3.0)),
+            WorldKind::TwinRooms => twin_rooms(seed),
+            WorldKind::DeskHall => desk_hall(seed),
+            WorldKind::SymmetricHall => symmetric_hall(seed),
         }
     }
 }

@@ -1,0 +1,302 @@
+//! Whether two scans agree where both looked: a check of a registration that counts what
+//! the overlap does not, the places where one scan saw a surface and the other saw through.
+//!
+//! Overlap counts coinciding voxels, and in man-made places much coincides anywhere: a
+//! floor, a ceiling, a wall at a common height. A wrong pose still puts some of the scan
+//! where the target's rays passed freely, and (seen from the other side) some of the
+//! target where the scan's rays passed. [`consistency`] measures both at the finest
+//! resolution after refinement:
+//!
+//! * only **surface** voxels count: those with at least [`MIN_SURFACE_NEIGHBOURS`] occupied
+//!   voxels of their own scan among their 26 neighbours (a stray return, a speck of dust or
+//!   a random outlier has none, and says nothing about a surface);
+//! * a source voxel is **supported** when a target voxel is occupied in its 3 x 3 x 3
+//!   neighbourhood (one cell of tolerance absorbs the range noise and the grid's phase);
+//! * it is **contradicted** when it is not supported and lies deep in the target's free
+//!   space: its cell and the six next to it were crossed by the target's rays (minus
+//!   [`super::FREE_SPACE_MARGIN`] before each return), so that rays grazing a floor do not
+//!   count against the floor;
+//! * otherwise the target never observed it, and it does not count.
+//!
+//! The agreement of one side is `supported / (supported + contradicted)`; the same is
+//! computed for the target's voxels against the source's free space, and
+//! [`Consistency::agreement`] is the smaller of the two. A right pose scores close to 1
+//! (what is left is moving things, glass and rays grazing a surface); a wrong pose leaves
+//! surfaces hanging in the other scan's open space.
+
+use super::target::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::Result;
+use nalgebra::Point3;
+
+use crate::geometry::{Pose, VoxelKey};
+use crate::occupancy::OccupancyList;
+
+/// Occupied neighbours (of 26, in its own scan) a voxel needs to count as surface.
+pub const MIN_SURFACE_NEIGHBOURS: usize = 4;
+
+/// The 26 neighbour offsets and the voxel itself.
+fn neighbourhood(k: VoxelKey) -> impl Iterator<Item = VoxelKey> {
+    (-1..=1).flat_map(move |dx| {
+        (-1..=1).flat_map(move |dy| {
+            (-1..=1).filter_map(move |dz| {
+                Some(VoxelKey::new(
+                    k.x.checked_add(dx)?,
+                    k.y.checked_add(dy)?,
+                    k.z.checked_add(dz)?,
+                ))
+            })
+        })
+    })
+}
+
+/// The voxels of `list` with at least [`MIN_SURFACE_NEIGHBOURS`] occupied neighbours.
+fn surface(list: &OccupancyList) -> OccupancyList {
+    list.filtered(|k, _| {
+        neighbourhood(k)
+            .filter(|n| *n != k && list.count(*n) > 0)
+            .nth(MIN_SURFACE_NEIGHBOURS - 1)
+            .is_some()
+    })
+}
+
+/// Upright voxels (of one side) the other scan must observe for [`SideAgreement::agreement`]
+/// to be taken over upright structure alone.
+pub const MIN_UPRIGHT_SEEN: u64 = 100;
+
+/// One side's count: the voxels of one scan against the other's occupancy and free space.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SideAgreement {
+    /// Surface voxels of this scan.
+    pub voxels: u64,
+    /// Voxels with an occupied voxel of the other scan within one cell.
+    pub supported: u64,
+    /// Voxels the other scan saw through (free, and not supported), counted only in
+    /// patches: with at least [`MIN_CONTRADICTED_NEIGHBOURS`] such neighbours.
+    pub contradicted: u64,
+    /// Of [`SideAgreement::voxels`], those on upright structure (walls, furniture sides:
+    /// an occupied voxel two layers above or below within one cell sideways), not on a
+    /// floor or ceiling.
+    pub upright: u64,
+    /// Upright voxels supported.
+    pub upright_supported: u64,
+    /// Upright voxels contradicted.
+    pub upright_contradicted: u64,
+}
+
+impl SideAgreement {
+    /// The share of this scan's observed surface that the other supports:
+    /// `supported / (supported + contradicted)` over its upright voxels when the other
+    /// scan observed at least [`MIN_UPRIGHT_SEEN`] of them, else over all its voxels; 1
+    /// when the other observed none. Floors and ceilings are left out because any two
+    /// indoor places share them: with them, unrelated simulated rooms agreed at 0.89-0.97;
+    /// on upright structure alone at 0.75-0.83, while the right real pairs of the data
+    /// folder agree at 0.89-1.00.
+    pub fn agreement(&self) -> f64 {
+        let (s, c) = if self.upright_supported + self.upright_contradicted >= MIN_UPRIGHT_SEEN {
+            (self.upright_supported, self.upright_contradicted)
+        } else {
+            (self.supported, self.contradicted)
+        };
+        if s + c == 0 {
+            1.0
+        } else {
+            s as f64 / (s + c) as f64
+        }
+    }
+
+    /// The share of this scan's voxels the other scan observed (supported or contradicted).
+    pub fn observed_fraction(&self) -> f64 {
+        if self.voxels == 0 {
+            0.0
+        } else {
+            (self.supported + self.contradicted) as f64 / self.voxels as f64
+        }
+    }
+}
+
+/// How two registered scans agree where both looked (module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Consistency {
+    /// The source's voxels (moved by the pose) against the target.
+    pub source: SideAgreement,
+    /// The target's voxels against the source's free space; `None` when the target has no
+    /// points to check (a map without them) or the source no sensor origin to trace from.
+    pub target: Option<SideAgreement>,
+    /// Voxel edge of the check, metres.
+    pub resolution: f64,
+}
+
+impl Consistency {
+    /// The smaller agreement of the two sides (the source's alone when the target side is
+    /// unknown).
+    pub fn agreement(&self) -> f64 {
+        let s = self.source.agreement();
+        self.target.map_or(s, |t| s.min(t.agreement()))
+    }
+}
+
+/// Counts one scan's surface voxels (`mine`, already in the other's frame) against the other's
+/// occupancy and free space (`other`, at the same resolution).
+fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) -> SideAgreement {
+    let res = other.resolution();
+    let levels = other.pyramid().levels();
+    let tol = ANGULAR_TOLERANCE.tan();
+    let mut side = SideAgreement {
+        voxels: mine.len() as u64,
+        ..Default::default()
+    };
+    let mut seen_through = std::collections::HashMap::new();
+    for (k, _) in mine.iter() {
+        // The level whose cell covers the angular tolerance at this range.
+        let d = (mine.center(k) - origin).norm();
+        let level = ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1);
+        let f = 1i32 << level;
+        let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
+        let occ = other.pyramid().level(level);
+        let up = is_upright(mine, k);
+        side.upright += u64::from(up);
+        let near = neighbourhood(kl).any(|n| occ.count(n) > 0);
+        if near {
+            side.supported += 1;
+            side.upright_supported += u64::from(up);
+        } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
+            seen_through.insert(k, up);
+        }
+    }
+    // A contradiction counts only as part of a patch: a wall or a piece of furniture
+    // standing in the other's open space is a patch of voxels, a stray return (noise, a
+    // spurious point, a random outlier) is not and says nothing about the pose.
+    for (k, up) in &seen_through {
+        let patch = neighbourhood(*k)
+            .filter(|n| n != k && seen_through.contains_key(n))
+            .nth(MIN_CONTRADICTED_NEIGHBOURS - 1)
+            .is_some();
+        if patch {
+            side.contradicted += 1;
+            side.upright_contradicted += u64::from(*up);
+        }
+    }
+    side
+}
+
+/// Contradicted voxels (of one side) with fewer contradicted neighbours than this are
+/// stray returns and not counted ([`SideAgreement::contradicted`]).
+pub const MIN_CONTRADICTED_NEIGHBOURS: usize = 2;
+
+/// Whether `k` lies on upright structure: an occupied voxel two layers above or below it,
+/// within one cell sideways (a floor or ceiling one or two layers thick has none).
+fn is_upright(list: &OccupancyList, k: VoxelKey) -> bool {
+    [-2, 2].iter().any(|&dz| {
+        (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| list.count(VoxelKey::new(k.x + dx, k.y + dy, k.z + dz)) > 0)
+        })
+    })
+}
+
+/// Whether a cell and its six face neighbours are all free: the free space eroded by one
+/// cell. A ray grazing a floor marks the cells just above the floor free though the floor
+/// is there (its returns too sparse to show every cell): a surface voxel in such a cell has
+/// an unknown or occupied neighbour below and is not counted as seen through.
+fn deep_free(g: &super::score::DenseGrid, k: VoxelKey) -> bool {
+    let (x, y, z) = (k.x as i64, k.y as i64, k.z as i64);
+    [
+        (0, 0, 0),
+        (1, 0, 0),
+        (-1, 0, 0),
+        (0, 1, 0),
+        (0, -1, 0),
+        (0, 0, 1),
+        (0, 0, -1),
+    ]
+    .iter()
+    .all(|(dx, dy, dz)| g.contains(x + dx, y + dy, z + dz))
+}
+
+/// How far a pose may be off in angle and still count as agreeing: a voxel at distance `d`
+/// from its sensor is checked at the coarsest level whose cell is at most `d tan(this)`
+/// (radians; 1°, the refinement's accuracy on the real pairs): a degree of pitch moves a
+/// wall 20 m away by 0.35 m.
+pub const ANGULAR_TOLERANCE: f64 = std::f64::consts::PI / 180.0;
+
+/// The agreement of `source`, placed by `pose` (`T_target_source`), with a prepared
+/// `target` (its finest level and free space), and of `target_points` (in the target frame;
+/// `None` to skip that side) with the source's free space, at the target's finest
+/// resolution.
+///
+/// ```
+/// use nalgebra::Point3;
+/// use olmap::align::{consistency, SearchTarget};
+/// use olmap::cloud::PointCloud;
+/// use olmap::geometry::Pose;
+/// // A scan of a corner (floor and two walls) from above the floor, sensor at (1.5, 1.5, 1).
+/// let mut points = Vec::new();
+/// for i in 0..60 {
+///     for j in 0..60 {
+///         let (a, b) = (i as f32 * 0.05, j as f32 * 0.05);
+///         points.extend([Point3::new(a, b, 0.0), Point3::new(a, 0.0, b), Point3::new(0.0, a, b)]);
+///     }
+/// }
+/// let mut scan = PointCloud::from_points(points);
+/// scan.set_origin(Point3::new(1.5, 1.5, 1.0));
+/// let target = SearchTarget::from_cloud(&scan, 0.1, 1).unwrap();
+/// let right = consistency(&scan, &target, Some(&scan), &Pose::identity()).unwrap();
+/// assert!(right.agreement() > 0.99);
+/// // Moved 0.8 m into the room, the walls stand in the space the target saw through.
+/// let wrong = Pose::from_xyz_ypr(0.8, 0.8, 0.0, 0.0, 0.0, 0.0);
+/// assert!(consistency(&scan, &target, Some(&scan), &wrong).unwrap().agreement() < 0.8);
+/// ```
+///
+/// # Errors
+/// Only for an invalid resolution (never for a target built by this crate).
+pub fn consistency(
+    source: &PointCloud,
+    target: &SearchTarget,
+    target_points: Option<&PointCloud>,
+    pose: &Pose,
+) -> Result<Consistency> {
+    let seen = match target_points {
+        Some(t) if !t.is_empty() && !source.is_empty() => Some(source_view(source, target)?),
+        _ => None,
+    };
+    consistency_seen(source, seen.as_ref(), target, target_points, pose)
+}
+
+/// What the source saw, for the target side of [`consistency_seen`]: its surfaces and free
+/// space at `target`'s finest resolution, in its own frame (the same for every pose, so a
+/// caller checking several poses builds it once).
+pub fn source_view(source: &PointCloud, target: &SearchTarget) -> Result<SearchTarget> {
+    SearchTarget::from_cloud(source, target.resolution(), target.pyramid().levels())
+}
+
+/// [`consistency`] with the source's view prepared ([`source_view`]; `None` skips the
+/// target side).
+pub fn consistency_seen(
+    source: &PointCloud,
+    seen_from_source: Option<&SearchTarget>,
+    target: &SearchTarget,
+    target_points: Option<&PointCloud>,
+    pose: &Pose,
+) -> Result<Consistency> {
+    let res = target.resolution();
+    let mut moved = OccupancyList::new(res)?;
+    moved.add_points(source, pose, 1);
+    let source_side = count_side(
+        &surface(&moved),
+        &pose.transform_point(&source.origin()),
+        target,
+    );
+    let target_side = match (target_points, seen_from_source) {
+        (Some(t), Some(seen)) if !t.is_empty() => {
+            let mut back = OccupancyList::new(res)?;
+            back.add_points(t, &pose.inverse(), 1);
+            Some(count_side(&surface(&back), &source.origin(), seen))
+        }
+        _ => None,
+    };
+    Ok(Consistency {
+        source: source_side,
+        target: target_side,
+        resolution: res,
+    })
+}

@@ -1,0 +1,261 @@
+//! The trust verdict of a registration: one documented rule over the evidence of the
+//! search, the hypothesis verification, the refinement and the agreement of the two scans,
+//! with every failed test said in words
+//! ([`Registration::doubts`](super::Registration::doubts)).
+//!
+//! # The rule
+//! A registration is **trusted** when all of these hold ([`TrustThresholds`] holds the
+//! numbers):
+//!
+//! 1. **Overlap**: at least `min_overlap_fraction` of the scan's voxels coincide with the
+//!    target's at the search's pose (finest level).
+//! 2. **Significance**: the overlap is `min_significance` standard deviations above what as
+//!    many voxels dropped at random would give (thesis (5.4)-(5.5)). In man-made places this
+//!    test alone is weak: floors, ceilings and walls at common heights make unrelated
+//!    places overlap, and the trust suite's unrelated pairs reach z = 30-150, so its
+//!    false-positive rate on its own is high (see the closing numbers in
+//!    [`TrustThresholds`]); it never decides alone.
+//! 3. **Uniqueness**, measured on the refined hypotheses ([`super::verify`]): the search's
+//!    best and its strongest distinct rivals (other cluster heads, the best solution
+//!    farther than `ambiguity_distance` / `ambiguity_angle`, carried through every level:
+//!    [`super::Alignment::runner_up`]) are each refined; rivals the refinement brings into
+//!    an earlier one's basin (3 cells or 3°) are the same answer and dropped. The one that
+//!    fits best wins, and every remaining distinct rival must be **refuted**: its fit
+//!    (supported voxels, minus contradicted ones, a surface of one scan where the other
+//!    saw through, weighted 8) must fall short of the winner's by at least
+//!    `min_refutation` standard deviations of a count
+//!    ([`super::verify::Verification::refutation`]). A repeated room, a row of identical
+//!    desks or a symmetric hall gives a rival that fits as well as the winner and is not
+//!    refuted; an answer whose rival the free space rules out is unique.
+//!
+//!    The search's own score gap (best over best distinct, [`super::Alignment::runner_up_ratio`])
+//!    and the spread of near-best poses ([`super::Alignment::spread`]) are reported but not
+//!    tested: on the trust suite the right answers of furnished rooms have search rivals
+//!    at 63-99 % of the best score, which the refined free-space test tells apart.
+//! 4. **Refinement**: ICP converged, kept at least `min_inlier_fraction` of the points as
+//!    inliers, and ended within `max_refine_shift_cells` cells of the search's pose.
+//! 5. **Observability**: every searched degree of freedom is constrained by the surfaces: no
+//!    eigen-direction of the point-to-plane information matrix that involves a searched axis
+//!    is weaker than [`IcpParams::weak_fraction`](super::icp::IcpParams::weak_fraction) of
+//!    the strongest (a corridor leaves its length free, a floor leaves x, y and heading
+//!    free, two walls leave the height free); the free axes are named.
+//! 6. **Agreement**: where both scans looked, they agree: at least `min_agreement` of each
+//!    scan's surface voxels that the other observed are supported by its surfaces rather
+//!    than lying in its free space ([`super::consistency`]). A mirror image, an unrelated
+//!    place or a wrong room leaves surfaces hanging in the other scan's open space.
+//! 7. **Window edge**: in a window search the chosen pose is not on the window's edge (the
+//!    optimum may lie outside; the mapper widens the window).
+//!
+//! Tests 1-3 (the search's part) are checked first; a search that fails them is not
+//! refined (ICP cannot make an ambiguous or barely overlapping match trustworthy, and
+//! skipping it saves the most expensive part of every hopeless attempt).
+//!
+//! # Calibration
+//! The thresholds were chosen on the trust suite ([`crate::sim::trust_cases`]: unrelated
+//! places, identical rooms, rows of desks, corridors, symmetric halls, floors, two walls,
+//! low overlap, pieces of scans, outliers, partial views; `olmap bench --trust`) with
+//! seeds 1-3 and checked on held-out seeds and on the real pairs of the shared data (3DTK,
+//! the outdoor car scans, unrelated real scenes, a mirrored 3DTK scan).
+
+use super::consistency::Consistency;
+use super::icp::IcpResult;
+use super::lattice::{Alignment, Candidate};
+use super::params::{Dof, Region, SearchParams};
+use super::verify::Verification;
+use crate::geometry::Pose;
+
+/// When a registration is trusted: the numbers of the rule in the [module
+/// documentation](self). A result is trusted only if every test passes; the failed ones
+/// are listed in [`super::Registration::doubts`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrustThresholds {
+    /// Smallest overlap fraction at the finest search level (default 0.10). Correct matches
+    /// of the real pairs overlap 22-37 %, unrelated real scenes 2-4 %.
+    pub min_overlap_fraction: f64,
+    /// Smallest significance z-score (default 10).
+    pub min_significance: f64,
+    /// Smallest refutation of the distinct runner-up, in standard deviations of the fit gap
+    /// to the winner (default 4; see
+    /// [`super::verify::Verification::refutation`]).
+    pub min_refutation: f64,
+    /// Smallest ICP inlier fraction (default 0.4: the real pairs keep 0.62-0.85, right
+    /// matches of scans with half their points random outliers 0.46-0.52).
+    pub min_inlier_fraction: f64,
+    /// Largest move of the refinement away from the search's pose, in finest cells
+    /// (default 3): a larger move means the search's cell was not the refined optimum's.
+    pub max_refine_shift_cells: f64,
+    /// Smallest agreement of the two scans where both looked (default 0.85: the real pairs
+    /// agree at 0.89-1.00 on both sides, a mirror image of a 3DTK scan at 0.81).
+    pub min_agreement: f64,
+}
+
+impl Default for TrustThresholds {
+    fn default() -> Self {
+        TrustThresholds {
+            min_overlap_fraction: 0.10,
+            min_significance: 10.0,
+            min_refutation: 4.0,
+            min_inlier_fraction: 0.4,
+            max_refine_shift_cells: 3.0,
+            min_agreement: 0.85,
+        }
+    }
+}
+
+/// Doubts about a search alone (tests 1-3).
+pub(super) fn search_doubts(search: &Alignment, t: &TrustThresholds) -> Vec<String> {
+    let mut doubts = Vec::new();
+    if search.overlap_fraction < t.min_overlap_fraction {
+        doubts.push(format!(
+            "only {:.1} % of the scan's voxels meet the target's (< {:.0} %)",
+            100.0 * search.overlap_fraction,
+            100.0 * t.min_overlap_fraction
+        ));
+    }
+    if search.significance < t.min_significance {
+        doubts.push(format!(
+            "the overlap is not significant (z = {:.1} < {:.1})",
+            search.significance, t.min_significance
+        ));
+    }
+    doubts
+}
+
+/// Doubts about the uniqueness of the verified winner (test 3): a distinct rival that
+/// the scans do not refute.
+pub(super) fn uniqueness_doubts(v: &Verification, t: &TrustThresholds) -> Vec<String> {
+    let Some(i) = v.runner_up else {
+        return Vec::new();
+    };
+    let z = v.refutation();
+    if z >= t.min_refutation {
+        return Vec::new();
+    }
+    let (best, rival) = (v.winner().pose(), v.hypotheses[i].pose());
+    let d = (rival.translation() - best.translation()).norm();
+    let a = rival.rotation().angle_to(&best.rotation()).to_degrees();
+    let (fw, fr) = (v.winner().fit, v.hypotheses[i].fit);
+    vec![format!(
+        "a distinct solution {d:.2} m and {a:.0}° away fits nearly as well (fit {fr:.0} against \
+         {fw:.0}; gap {z:.1} < {:.1} σ): the place repeats or is symmetric",
+        t.min_refutation
+    )]
+}
+
+/// Doubts about the refinement (tests 4-5); `dof` says which axes were searched.
+pub(super) fn refinement_doubts(
+    start: &Candidate,
+    r: &IcpResult,
+    resolution: f64,
+    dof: Dof,
+    t: &TrustThresholds,
+) -> Vec<String> {
+    let mut doubts = Vec::new();
+    if !r.converged {
+        doubts.push("the refinement did not converge".into());
+    }
+    if r.inlier_fraction < t.min_inlier_fraction {
+        doubts.push(format!(
+            "refinement inlier fraction {:.3} < {:.3}",
+            r.inlier_fraction, t.min_inlier_fraction
+        ));
+    }
+    let shift = (r.pose.translation() - start.pose.translation()).norm();
+    if shift > t.max_refine_shift_cells * resolution {
+        doubts.push(format!(
+            "the refinement moved {shift:.3} m from the search's pose (> {:.0} cells)",
+            t.max_refine_shift_cells
+        ));
+    }
+    let free = r.degeneracy.free_searched_axes(searched_axes(dof));
+    if !free.is_empty() {
+        doubts.push(format!(
+            "the surfaces leave {} unconstrained (a corridor, a plane or too few walls)",
+            free.join(" and ")
+        ));
+    }
+    doubts
+}
+
+/// Doubts about the agreement of the two scans (test 6).
+pub(super) fn agreement_doubts(c: &Consistency, t: &TrustThresholds) -> Vec<String> {
+    let a = c.agreement();
+    if a >= t.min_agreement {
+        return Vec::new();
+    }
+    let (side, s) = match c.target {
+        Some(ts) if ts.agreement() < c.source.agreement() => ("target's", ts),
+        _ => ("scan's", c.source),
+    };
+    vec![format!(
+        "the scans disagree where both looked: {:.0} % of the {side} observed surface lies where \
+         the other saw through (agreement {a:.2} < {:.2})",
+        100.0 * (1.0 - s.agreement()),
+        t.min_agreement
+    )]
+}
+
+/// How far inside a window's edge, in finest cells, the search's pose must lie in x and y.
+pub const WINDOW_EDGE_CELLS: f64 = 1.0;
+
+/// Which of `(ωx, ωy, ωz, vx, vy, vz)` a search explores: roll, pitch, yaw, x, y, z.
+pub(super) fn searched_axes(dof: Dof) -> [bool; 6] {
+    match dof {
+        Dof::XyYaw => [false, false, true, true, true, false],
+        Dof::XyzYaw => [false, false, true, true, true, true],
+        Dof::SixDof { .. } => [true; 6],
+    }
+}
+
+/// Doubts about where the chosen pose lies in a window search (test 7). A pose on or near
+/// the window's edge may be the best of the window only because the optimum lies outside
+/// it (the odometry drifted farther than the window allows), and the refinement then only
+/// reaches the truncated slope of that optimum. So in x and y the search's pose must lie
+/// at least [`WINDOW_EDGE_CELLS`] finest cells (at most half the window) inside the
+/// window; in z and heading it must not be the window's first or last lattice pose. The
+/// caller widens the window. `start` is the chosen hypothesis' search pose (a lattice
+/// pose). A look-alike inside the window while the truth lies outside is not an edge
+/// case: the uniqueness test sees it only if the truth's peak reaches into the window,
+/// which is why the mapper's windows grow before it trusts a match near an edge.
+pub(super) fn window_doubts(start: &Pose, params: &SearchParams) -> Vec<String> {
+    let Region::Window { xy, z, yaw } = params.region else {
+        return Vec::new();
+    };
+    // The window's lattice runs from `-half` to the first step at or past `+half` (see
+    // the lattice's bounds): its first and last poses are the edge.
+    let eps_t = 0.01 * params.resolution;
+    // Within `margin` of the edge (a pose exactly one cell inside is not on it).
+    let on_edge = |d: f64, half: f64, margin: f64| half > 0.0 && d.abs() >= half - margin;
+    let margin_xy = (WINDOW_EDGE_CELLS * params.resolution)
+        .min(0.5 * xy)
+        .max(2.0 * eps_t)
+        - eps_t;
+    let d = start.translation() - params.prior.translation();
+    let mut edges = Vec::new();
+    for (name, v) in [("x", d.x), ("y", d.y)] {
+        if on_edge(v, xy, margin_xy) {
+            edges.push(format!("{name} {v:+.2} m"));
+        }
+    }
+    if !matches!(params.dof, Dof::XyYaw) && on_edge(d.z, z, eps_t) {
+        edges.push(format!("z {:+.2} m", d.z));
+    }
+    if yaw < std::f64::consts::PI {
+        let (y0, _, _) = params.prior.yaw_pitch_roll();
+        let (y1, _, _) = start.yaw_pitch_roll();
+        let dy = (y1 - y0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        if on_edge(dy, yaw, 1e-6) {
+            edges.push(format!("heading {:+.1}°", dy.to_degrees()));
+        }
+    }
+    if edges.is_empty() {
+        return Vec::new();
+    }
+    vec![format!(
+        "the best pose lies on or within {margin_xy:.2} m of the edge of the search window \
+         ({} from the prior; window ±{xy:.2} m, ±{:.0}°): the optimum may lie outside it",
+        edges.join(", "),
+        yaw.to_degrees()
+    )]
+}

@@ -1,0 +1,277 @@
+//! Hypothesis verification: the search's best pose and its strongest distinct rivals are
+//! each refined and scored by how well the two scans agree, and the best-fitting one wins.
+//!
+//! The overlap score of the search counts coinciding voxels. Two scans taken a few metres
+//! apart sample the same surfaces differently (densely near their own sensor, sparsely
+//! far away), so a wrong pose that lays one scan's dense near field on the other's can
+//! out-count the truth, and a 90° or 180° turn of a rectangular room often comes close. A
+//! refined pose can be judged more finely: after ICP, [`consistency`] counts the surface
+//! voxels of each scan that the other supports and those it saw through. The **fit** of a
+//! hypothesis is
+//!
+//! `fit = supported(source) + supported(target) − CONTRADICTION_WEIGHT · (contradicted(source) + contradicted(target))`
+//!
+//! A surface voxel in the other scan's free space is strong evidence against a pose, so
+//! one contradiction outweighs [`CONTRADICTION_WEIGHT`] supports. On the trust suite's
+//! same-place, partial-view and outlier pairs (3 x 30 pairs, seeds 1-3) choosing by fit
+//! instead of by overlap raised the right answers from 24 to 29, 6 to 16 and 9 to 12.
+//!
+//! The strongest rival whose refined pose ends farther than [`DISTINCT_TRANSLATION_CELLS`]
+//! cells or [`DISTINCT_ROTATION`] from the winner's is the *distinct runner-up*; its fit
+//! relative to the winner's is the uniqueness the verdict tests
+//! ([`super::verdict`]). Rivals that the refinement brings back into the winner's basin
+//! are the same solution and do not count.
+
+use super::consistency::{consistency_seen, source_view, Consistency};
+use super::icp::{refine, IcpParams, IcpResult};
+use super::lattice::{Alignment, Candidate};
+use super::target::SearchTarget;
+use crate::cloud::PointCloud;
+use crate::error::Result;
+use crate::geometry::{Aabb, Pose};
+
+/// One contradiction (a surface voxel where the other scan saw through) costs this many
+/// supported voxels in a hypothesis' fit.
+pub const CONTRADICTION_WEIGHT: f64 = 8.0;
+
+/// Rivals of the search's best are verified when their search score is at least this
+/// fraction of the best's (below it the overlap already rules them out).
+pub const VERIFY_MIN_RATIO: f64 = 0.4;
+
+/// At most this many hypotheses are refined (the best and three rivals).
+pub const MAX_HYPOTHESES: usize = 4;
+
+/// Two refined poses farther apart than this many finest cells are distinct solutions.
+pub const DISTINCT_TRANSLATION_CELLS: f64 = 3.0;
+
+/// Two refined poses turned by more than this (radians; 3°) are distinct solutions.
+pub const DISTINCT_ROTATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
+/// One verified hypothesis.
+#[derive(Debug, Clone)]
+pub struct Hypothesis {
+    /// The search's pose it started from, with its search score.
+    pub start: Candidate,
+    /// Its refinement.
+    pub refinement: IcpResult,
+    /// The agreement of the two scans at its final pose (refined when converged).
+    pub consistency: Consistency,
+    /// Its fit (module documentation).
+    pub fit: f64,
+}
+
+impl Hypothesis {
+    /// Surface voxels of either scan that the other saw through at this hypothesis' pose.
+    pub fn contradicted(&self) -> u64 {
+        let t = self.consistency.target.unwrap_or_default();
+        self.consistency.source.contradicted + t.contradicted
+    }
+
+    /// The final pose: refined when the refinement converged, else the search's.
+    pub fn pose(&self) -> Pose {
+        if self.refinement.converged {
+            self.refinement.pose
+        } else {
+            self.start.pose
+        }
+    }
+}
+
+/// The verified hypotheses of one registration.
+#[derive(Debug, Clone)]
+pub struct Verification {
+    /// Every hypothesis refined, the search's best first.
+    pub hypotheses: Vec<Hypothesis>,
+    /// Index of the winner (the best fit; the earlier on a tie).
+    pub chosen: usize,
+    /// Index of the distinct runner-up, if a rival ended outside the winner's basin: the
+    /// least refuted one ([`Verification::refutation`]).
+    pub runner_up: Option<usize>,
+    /// Whether the winner's refined pose is distinct from the search's best's.
+    pub distinct_from_best: bool,
+}
+
+impl Verification {
+    /// The winning hypothesis.
+    pub fn winner(&self) -> &Hypothesis {
+        &self.hypotheses[self.chosen]
+    }
+
+    /// The distinct runner-up's fit as a fraction of the winner's (0 without one, or when
+    /// the winner's fit is not positive).
+    pub fn runner_up_ratio(&self) -> f64 {
+        let best = self.winner().fit;
+        match self.runner_up {
+            Some(i) if best > 0.0 => (self.hypotheses[i].fit / best).max(0.0),
+            _ => 0.0,
+        }
+    }
+
+    /// How strongly the scans refute the distinct runner-up against the winner: the gap
+    /// between their fits in standard deviations of a count,
+    /// `(fit_winner − fit_rival) / sqrt(S_w + S_r + w²·(C_w + C_r))` with `S` the supported
+    /// and `C` the contradicted voxels of both sides and `w` the
+    /// [`CONTRADICTION_WEIGHT`]. Infinite without a distinct runner-up. A rival that leaves
+    /// walls standing where the other scan saw through, or explains much less of the
+    /// overlap, scores high; an alias of a repeated or symmetric place fits as well as the
+    /// winner and scores near zero.
+    pub fn refutation(&self) -> f64 {
+        match self.runner_up {
+            Some(i) => refutation(self.winner(), &self.hypotheses[i]),
+            None => f64::INFINITY,
+        }
+    }
+
+    /// Whether the search's best was overruled by a distinct rival: the winner is not the
+    /// search's best and its refined pose ended outside the best's basin (a rival that the
+    /// refinement brought to the same pose is the same answer).
+    pub fn overruled(&self) -> bool {
+        self.chosen != 0 && self.distinct_from_best
+    }
+}
+
+/// The fit of a consistency count (module documentation).
+pub fn fit(c: &Consistency) -> f64 {
+    let t = c.target.unwrap_or_default();
+    (c.source.supported + t.supported) as f64
+        - CONTRADICTION_WEIGHT * (c.source.contradicted + t.contradicted) as f64
+}
+
+/// [`Verification::refutation`] of `rival` against `winner`.
+fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
+    let counts = |h: &Hypothesis| {
+        let t = h.consistency.target.unwrap_or_default();
+        let s = &h.consistency.source;
+        ((s.supported + t.supported) as f64, h.contradicted() as f64)
+    };
+    let ((sw, cw), (sr, cr)) = (counts(winner), counts(rival));
+    let w2 = CONTRADICTION_WEIGHT * CONTRADICTION_WEIGHT;
+    (winner.fit - rival.fit) / (sw + sr + w2 * (cw + cr) + 1.0).sqrt()
+}
+
+/// The search's best and up to `MAX_HYPOTHESES - 1` distinct rivals scoring at least
+/// [`VERIFY_MIN_RATIO`] of it: its other cluster heads, then its runner-up.
+fn starts(search: &Alignment) -> Vec<Candidate> {
+    let best = Candidate {
+        pose: search.pose,
+        overlap: search.overlap,
+        score: search.score,
+    };
+    let mut out = vec![best];
+    let floor = VERIFY_MIN_RATIO * search.score as f64;
+    let rivals = search
+        .candidates
+        .iter()
+        .skip(1)
+        .chain(search.runner_up.as_ref());
+    for c in rivals {
+        if out.len() == MAX_HYPOTHESES {
+            break;
+        }
+        let new = out.iter().all(|o| {
+            (o.pose.translation() - c.pose.translation()).norm() > 1e-9
+                || o.pose.rotation().angle_to(&c.pose.rotation()) > 1e-9
+        });
+        if new && c.score as f64 >= floor && search.score > 0 {
+            out.push(*c);
+        }
+    }
+    out
+}
+
+/// Refines and scores the search's best and its strong rivals against `target` (the
+/// prepared target, for the agreement) and `points` (the target's points, for ICP),
+/// cropping the points to `reach` metres around each hypothesis' footprint. With `prior`
+/// (a window search's prior pose and a margin in metres) the distinct runner-up is chosen
+/// among the rivals no farther from the prior than the winner plus the margin.
+pub(super) fn verify(
+    source: &PointCloud,
+    target: &SearchTarget,
+    points: &PointCloud,
+    search: &Alignment,
+    icp: &IcpParams,
+    reach: f64,
+    prior: Option<(&Pose, f64)>,
+) -> Result<Verification> {
+    let res = target.resolution();
+    let seen = if points.is_empty() || source.is_empty() {
+        None
+    } else {
+        Some(source_view(source, target)?)
+    };
+    let distinct_poses = |a: &Pose, b: &Pose| {
+        (a.translation() - b.translation()).norm() > DISTINCT_TRANSLATION_CELLS * res
+            || a.rotation().angle_to(&b.rotation()) > DISTINCT_ROTATION
+    };
+    let mut hypotheses: Vec<Hypothesis> = Vec::new();
+    for start in starts(search) {
+        let near = crop_near(source, points, &start.pose, reach);
+        let refinement = refine(source, &near, &start.pose, icp)?;
+        let at = if refinement.converged {
+            refinement.pose
+        } else {
+            start.pose
+        };
+        // A rival the refinement brought into an earlier hypothesis' basin is that
+        // hypothesis again (the search's lattice saw the shoulder of one peak twice).
+        if hypotheses.iter().any(|h| !distinct_poses(&h.pose(), &at)) {
+            continue;
+        }
+        let c = consistency_seen(source, seen.as_ref(), target, Some(&near), &at)?;
+        hypotheses.push(Hypothesis {
+            start,
+            refinement,
+            fit: fit(&c),
+            consistency: c,
+        });
+    }
+    let chosen = (0..hypotheses.len())
+        .max_by(|&a, &b| {
+            hypotheses[a]
+                .fit
+                .total_cmp(&hypotheses[b].fit)
+                .then(b.cmp(&a))
+        })
+        .unwrap_or(0);
+    let won = hypotheses[chosen].pose();
+    let distinct = |p: &Pose| distinct_poses(p, &won);
+    // With a prior (a window search), a rival counts only when it is about as near the
+    // prior as the winner (within `margin`): the prior makes a look-alike much farther from
+    // it unlikely, and ignoring that refused every scan of a room with rows of desks.
+    let plausible = |p: &Pose| {
+        prior.is_none_or(|(at, margin)| {
+            (p.translation() - at.translation()).norm()
+                <= (won.translation() - at.translation()).norm() + margin
+        })
+    };
+    let runner_up = (0..hypotheses.len())
+        .filter(|&i| {
+            let p = hypotheses[i].pose();
+            i != chosen && distinct(&p) && plausible(&p)
+        })
+        .min_by(|&a, &b| {
+            let w = &hypotheses[chosen];
+            refutation(w, &hypotheses[a])
+                .total_cmp(&refutation(w, &hypotheses[b]))
+                .then(a.cmp(&b))
+        });
+    let distinct_from_best = distinct(&hypotheses[0].pose());
+    Ok(Verification {
+        hypotheses,
+        chosen,
+        runner_up,
+        distinct_from_best,
+    })
+}
+
+/// The points within `reach` of the source's footprint at `pose` (all of them when the
+/// source has none).
+fn crop_near(source: &PointCloud, points: &PointCloud, pose: &Pose, reach: f64) -> PointCloud {
+    match source.transformed(pose).bounding_box() {
+        Some(b) => {
+            let m = nalgebra::Vector3::repeat(reach);
+            points.crop_box(&Aabb::new(b.min - m, b.max + m))
+        }
+        None => points.clone(),
+    }
+}

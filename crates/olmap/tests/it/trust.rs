@@ -1,0 +1,138 @@
+//! Trusted means right (issue 22): the verdict on the simulated trust suite and on the
+//! audit's failure cases. Wrong = outside 0.3 m / 3° of the truth
+//! ([`olmap::sim::RIGHT_TRANSLATION`], [`olmap::sim::RIGHT_ROTATION`]) in simulation, and
+//! any trusted answer where no rigid transform exists.
+
+use olmap::align::{self, Dof, RegisterParams, SearchParams};
+use olmap::bench::{run_trust, Outcome, TrustOptions};
+use olmap::cloud::PointCloud;
+
+use crate::data;
+
+/// A short pass of the trust suite (2 pairs of each of the 12 kinds, a seed the thresholds
+/// were not chosen on): no trusted answer is wrong. (That the verdict is not simply "never"
+/// is checked on real data: `a_scan_against_itself_is_trusted_at_the_identity` and the
+/// real pairs of `align.rs`.)
+#[test]
+#[ignore = "issue 22 acceptance not met yet: desk-rows-01 (seed 11) is trusted 6.05 m off; \
+            the suite trusts 1-3 % of its pairs wrongly (stop note of 2026-12-02)"]
+fn trust_suite_short_pass_has_no_trusted_wrong_answer() {
+    let report = run_trust(
+        &TrustOptions {
+            seed: 11,
+            per_scene: 2,
+            register: RegisterParams::default(),
+        },
+        |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(report.rows.len(), 24);
+    for r in &report.rows {
+        eprintln!(
+            "{} {:?} err {:?} m overlap {:.2} z {:.0} rival {:.2} agreement {:?} {:?}",
+            r.name,
+            r.outcome,
+            r.error_m,
+            r.overlap_fraction,
+            r.significance,
+            r.runner_up_ratio,
+            r.agreement,
+            r.doubts
+        );
+    }
+    let wrong: Vec<&str> = report
+        .rows
+        .iter()
+        .filter(|r| r.outcome == Outcome::TrustedWrong)
+        .map(|r| r.name.as_str())
+        .collect();
+    assert!(wrong.is_empty(), "trusted and wrong: {wrong:?}");
+    // The search and the verification find the truth of some pairs with one right answer
+    // (whether the verdict dares to trust them is what the full suite reports).
+    assert!(
+        report
+            .rows
+            .iter()
+            .any(|r| r.answer == "unique" && r.right == Some(true)),
+        "no pair with a unique answer was found right"
+    );
+}
+
+/// The full suite (17 pairs of each kind, 204 pairs; minutes in release): the numbers of
+/// the closing note. `cargo test --release -- --ignored trust_suite_full`.
+#[test]
+#[ignore = "minutes: the whole trust suite"]
+fn trust_suite_full_has_no_trusted_wrong_answer() {
+    let report = run_trust(
+        &TrustOptions {
+            seed: 4,
+            per_scene: 17,
+            register: RegisterParams::default(),
+        },
+        |_, _| {},
+    )
+    .unwrap();
+    for s in &report.scenes {
+        eprintln!(
+            "{:15} {:9} pairs {:2} trusted-right {:2} alias {:2} wrong {:2} untrusted {:2} right {:2}",
+            s.scene, s.answer, s.pairs, s.trusted_right, s.trusted_alias, s.trusted_wrong,
+            s.untrusted, s.right
+        );
+    }
+    assert_eq!(report.trusted_wrong, 0);
+}
+
+/// Audit 1: a real 3DTK scan mirrored (y -> -y) against the original has no rigid
+/// transform onto it; it was trusted at z 187-233 because many voxels coincide. The
+/// agreement test sees the mirrored surfaces hanging in the original's free space.
+#[test]
+fn audit_mirrored_scan_not_trusted() {
+    if data().is_none() {
+        return;
+    }
+    let original = olmap::test_data::threedtk_scan(0, true).expect("the data folder was found");
+    let mut mirrored = original.clone();
+    for p in mirrored.points_mut() {
+        p.y = -p.y;
+    }
+    let o = original.origin();
+    mirrored.set_origin(nalgebra::Point3::new(o.x, -o.y, o.z));
+    let params = RegisterParams {
+        search: SearchParams {
+            dof: Dof::XyzYaw,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let r = align::register(&mirrored, &original, &params).unwrap();
+    eprintln!(
+        "mirrored: overlap {:.2} z {:.0} agreement {:?} {:?}",
+        r.search.overlap_fraction,
+        r.search.significance,
+        r.consistency.map(|c| c.agreement()),
+        r.doubts
+    );
+    assert!(!r.trusted, "a mirror image has no rigid transform");
+}
+
+/// The same scan against itself is trusted at the identity: the agreement and uniqueness
+/// tests do not refuse a perfect match (the test above could pass by refusing everything).
+#[test]
+fn a_scan_against_itself_is_trusted_at_the_identity() {
+    if data().is_none() {
+        return;
+    }
+    let scan: PointCloud = olmap::test_data::threedtk_scan(0, true).expect("the data folder");
+    let params = RegisterParams {
+        search: SearchParams {
+            dof: Dof::XyzYaw,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let r = align::register(&scan, &scan, &params).unwrap();
+    assert!(r.trusted, "{:?}", r.doubts);
+    assert!(r.pose.translation().norm() < 0.05, "{:?}", r.pose);
+    let c = r.consistency.expect("refined");
+    assert!(c.agreement() > 0.95, "{c:?}");
+}
