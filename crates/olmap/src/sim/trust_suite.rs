@@ -319,6 +319,29 @@ fn pair(rig: &Rig, world: &Arc<World>, a: Pose, b: Pose, seed: u64) -> Drawn {
     }
 }
 
+/// [`pair`] of robots standing at `a` (target) and `b` (source), each turned at random.
+fn pair_with_random_headings(
+    rig: &Rig,
+    world: &Arc<World>,
+    a: (f64, f64),
+    b: (f64, f64),
+    seed: u64,
+    rng: &mut SimRng,
+) -> Drawn {
+    let pa = robot_at(a.0, a.1, random_yaw(rng));
+    let pb = robot_at(b.0, b.1, random_yaw(rng));
+    pair(rig, world, pa, pb, seed)
+}
+
+/// The share of a drawn pair's source voxels that meet the target's at the truth (0
+/// without one).
+fn true_overlap(d: &Drawn) -> Result<f64> {
+    match d.truth {
+        Some(t) => overlap_at(&d.source, &d.target, &t),
+        None => Ok(0.0),
+    }
+}
+
 /// Lab or office, by the seed's parity.
 fn furnished(seed: u64) -> Arc<World> {
     Arc::new(if seed.is_multiple_of(2) {
@@ -432,19 +455,10 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             let a = (rng.range(1.0, 5.0), rng.range(1.0, 5.0));
             let b = (a.0 + rng.range(-2.0, 2.0), a.1 + rng.range(-2.0, 2.0));
             let b = (b.0.max(0.8), b.1.max(0.8));
-            pair(
-                &rig,
-                &world,
-                robot_at(a.0, a.1, random_yaw(rng)),
-                robot_at(b.0, b.1, random_yaw(rng)),
-                seed,
-            )
+            pair_with_random_headings(&rig, &world, a, b, seed, rng)
         }
     };
-    let true_overlap = match d.truth {
-        Some(t) => overlap_at(&d.source, &d.target, &t)?,
-        None => 0.0,
-    };
+    let true_overlap = true_overlap(&d)?;
     Ok(TrustCase {
         scene,
         name: String::new(),
@@ -468,18 +482,8 @@ fn draw_in_world(
 ) -> Result<(f64, Drawn)> {
     let a = spot(world, rng)?;
     let b = spot_near(world, rng, a, near.0, near.1)?;
-    let p = pair(
-        rig,
-        world,
-        robot_at(a.0, a.1, random_yaw(rng)),
-        robot_at(b.0, b.1, random_yaw(rng)),
-        seed,
-    );
-    let f = match p.truth {
-        Some(t) => overlap_at(&p.source, &p.target, &t)?,
-        None => 0.0,
-    };
-    Ok((f, p))
+    let p = pair_with_random_headings(rig, world, a, b, seed, rng);
+    Ok((true_overlap(&p)?, p))
 }
 
 /// Two scans 0.5-3 m apart in one furnished world that share at least 30 % of the source's
