@@ -87,8 +87,6 @@ pub struct Verification {
     /// Index of the distinct runner-up, if a rival ended outside the winner's basin: the
     /// least refuted one ([`Verification::refutation`]).
     pub runner_up: Option<usize>,
-    /// Whether the winner's refined pose is distinct from the search's best's.
-    pub distinct_from_best: bool,
 }
 
 impl Verification {
@@ -121,13 +119,6 @@ impl Verification {
             None => f64::INFINITY,
         }
     }
-
-    /// Whether the search's best was overruled by a distinct rival: the winner is not the
-    /// search's best and its refined pose ended outside the best's basin (a rival that the
-    /// refinement brought to the same pose is the same answer).
-    pub fn overruled(&self) -> bool {
-        self.chosen != 0 && self.distinct_from_best
-    }
 }
 
 /// The fit of a consistency count (module documentation).
@@ -135,6 +126,13 @@ pub fn fit(c: &Consistency) -> f64 {
     let t = c.target.unwrap_or_default();
     (c.source.supported + t.supported) as f64
         - CONTRADICTION_WEIGHT * (c.source.contradicted + t.contradicted) as f64
+}
+
+/// Whether two refined poses are the same solution: at most
+/// [`DISTINCT_TRANSLATION_CELLS`] cells of `resolution` and [`DISTINCT_ROTATION`] apart.
+pub fn same_solution(a: &Pose, b: &Pose, resolution: f64) -> bool {
+    (a.translation() - b.translation()).norm() <= DISTINCT_TRANSLATION_CELLS * resolution
+        && a.rotation().angle_to(&b.rotation()) <= DISTINCT_ROTATION
 }
 
 /// [`Verification::refutation`] of `rival` against `winner`.
@@ -199,10 +197,7 @@ pub(super) fn verify(
     } else {
         Some(source_view(source, target)?)
     };
-    let distinct_poses = |a: &Pose, b: &Pose| {
-        (a.translation() - b.translation()).norm() > DISTINCT_TRANSLATION_CELLS * res
-            || a.rotation().angle_to(&b.rotation()) > DISTINCT_ROTATION
-    };
+    let distinct_poses = |a: &Pose, b: &Pose| !same_solution(a, b, res);
     let mut hypotheses: Vec<Hypothesis> = Vec::new();
     for start in starts(search) {
         let near = crop_near(source, points, &start.pose, reach);
@@ -255,12 +250,10 @@ pub(super) fn verify(
                 .total_cmp(&refutation(w, &hypotheses[b]))
                 .then(a.cmp(&b))
         });
-    let distinct_from_best = distinct(&hypotheses[0].pose());
     Ok(Verification {
         hypotheses,
         chosen,
         runner_up,
-        distinct_from_best,
     })
 }
 

@@ -2,6 +2,7 @@
 //! odometry windows that grow, then globally; and the odometry trust test.
 
 use super::state::State;
+use crate::align::verify::same_solution;
 use crate::align::{register_to_split, Region, RegisterParams, Registration};
 use crate::error::Result;
 use crate::geometry::Pose;
@@ -77,7 +78,8 @@ impl State<'_> {
                             yaw: (2.0 * yaw * grow).min(std::f64::consts::PI),
                         };
                         let w = self.run(s, &wide)?;
-                        if !(w.trusted && same_answer(&w.pose, &r.pose, params.search.resolution)) {
+                        if !(w.trusted && same_solution(&w.pose, &r.pose, params.search.resolution))
+                        {
                             distrust_outer_half(
                                 &mut r,
                                 &prior,
@@ -166,12 +168,6 @@ fn distrust_outer_half(r: &mut Registration, prior: &Pose, half: f64, why: &str)
          prediction, window ±{half:.2} m): {why}",
         d.x, d.y
     ));
-}
-
-/// Whether two poses are the same answer: within 3 cells of `resolution` and 3°.
-fn same_answer(a: &Pose, b: &Pose, resolution: f64) -> bool {
-    (a.translation() - b.translation()).norm() <= 3.0 * resolution
-        && a.rotation().angle_to(&b.rotation()) <= 3f64.to_radians()
 }
 
 /// Distrusts a registration farther than `tolerance` metres from the odometry prediction
