@@ -1465,3 +1465,91 @@ fn graph_optimise_refuses_a_bad_file_with_its_line() {
     assert!(err.contains("bad.g2o") && err.contains("line 3"), "{err}");
     assert!(!out_path.exists());
 }
+
+/// Issue 23's interface on a real 2D log: `olmap poses LOG --out reference.txt`, `olmap map
+/// LOG --dof xy-yaw --odometry-noise … --noise-seed … --poses-out P`, `olmap eval` — the
+/// names match, the map's own report and `eval` agree on the error, and the error is within
+/// the issue's bound on the first 300 scans of the Intel log.
+#[test]
+fn carmen_log_maps_and_evaluates_end_to_end() {
+    let Some(d) = data() else { return };
+    let log = d.join("carmen_2d/intel-corrected.log.gz");
+    let log = log.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let reference = dir.path().join("reference.txt");
+    let poses = dir.path().join("poses.txt");
+    let graph = dir.path().join("graph.g2o");
+    let out = olmap(&["poses", log, "--out", reference.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = json(&olmap(&[
+        "map",
+        log,
+        "--dof",
+        "xy-yaw",
+        "--odometry-noise",
+        "0.05,2",
+        "--noise-seed",
+        "4",
+        "--max-scans",
+        "300",
+        "--poses-out",
+        poses.to_str().unwrap(),
+        "--graph-out",
+        graph.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(report["scans"], 300);
+    assert_eq!(report["placed"], 300);
+    let anchored = report["errors"]["anchored_rmse_m"].as_f64().unwrap();
+    assert!(
+        report["errors"]["ate_rmse_m"].as_f64().unwrap() <= 0.10,
+        "{report}"
+    );
+    // `olmap eval` (anchored at the first scan, as the map's anchored error) agrees.
+    let eval = json(&olmap(&[
+        "eval",
+        "--poses",
+        poses.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+        "--json",
+    ]));
+    let scans = eval["scans"].as_array().unwrap();
+    assert_eq!(scans.len(), 300);
+    let rms = (scans
+        .iter()
+        .map(|s| s["translation_m"].as_f64().unwrap().powi(2))
+        .sum::<f64>()
+        / 300.0)
+        .sqrt();
+    assert!(
+        (rms - anchored).abs() < 1e-3,
+        "eval {rms} vs map {anchored}"
+    );
+    // The graph file holds one vertex per scan and the edges the report counts.
+    let g2o = std::fs::read_to_string(&graph).unwrap();
+    assert_eq!(
+        g2o.lines().filter(|l| l.starts_with("VERTEX_SE2")).count(),
+        300
+    );
+    let edges: u64 = report["edges"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum();
+    assert_eq!(
+        g2o.lines().filter(|l| l.starts_with("EDGE_SE2")).count() as u64,
+        edges
+    );
+    // A 6-DoF request and a bad noise argument are refused with a clear error.
+    let bad = olmap(&["map", log, "--dof", "6dof"]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("x-y-yaw"));
+    let bad = olmap(&["map", log, "--odometry-noise", "0.05"]);
+    assert!(!bad.status.success());
+}

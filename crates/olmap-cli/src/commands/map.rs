@@ -9,6 +9,7 @@ use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
 use olmap::align::{RegisterParams, SearchParams};
 use olmap::io::{self, ReadOptions};
+use olmap::mapping::planar::{run_planar_log, OdometryNoise, PlanarLogJob, PlanarMapParams};
 use olmap::mapping::{run_map_job, MapJob, MapMode, MapParams, OdometrySource};
 use olmap::occupancy::{MapFormat, SensorModel};
 
@@ -36,9 +37,10 @@ pub struct MapArgs {
     /// name or in order), or `3dtk` to read each scan's sibling .pose file.
     #[arg(long, value_name = "FILE|3dtk")]
     pub odometry: Option<String>,
-    /// Output map (.olm or .bt).
+    /// Output map (.olm or .bt). Required for scan files; for a 2D log, optional: the map's
+    /// points as a cloud (.ply, .pcd, .xyz; z = 0).
     #[arg(short, long)]
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
     /// Write the scan poses `T_map_scan` as a pose list.
     #[arg(long, value_name = "FILE")]
     pub poses_out: Option<PathBuf>,
@@ -80,6 +82,35 @@ pub struct MapArgs {
     /// 3DTK .3d input: keep only returns between 20 cm and 3270 cm.
     #[arg(long = "3dtk-valid")]
     pub threedtk_valid: bool,
+    /// 2D logs (CARMEN `.log`/`.log.gz`): the odometry is the log's corrected poses
+    /// degraded with seeded noise on every step between scans: σ of x and y = FRAC × the
+    /// distance travelled, σ of the heading = DEG degrees per metre travelled and per radian
+    /// turned. `0,0` maps from the corrected poses themselves.
+    #[arg(long, value_name = "FRAC,DEG", default_value = "0.05,2")]
+    pub odometry_noise: String,
+    /// 2D logs: the seed of the odometry noise.
+    #[arg(long, default_value_t = 1)]
+    pub noise_seed: u64,
+    /// 2D logs: no loop closure (odometry and sequential registration only; shows what the
+    /// pose graph's closures buy).
+    #[arg(long)]
+    pub no_loop_closure: bool,
+    /// 2D logs, robustness test: before the final solve, add this fraction of the accepted
+    /// loop closures again as wrong ones (2-5 m off, between random scans); the report
+    /// says which the robust kernel rejected. 0 (default) = none.
+    #[arg(long, default_value_t = 0.0, value_name = "FRACTION")]
+    pub inject_wrong_closures: f64,
+    /// 2D logs: write a top view of the map (PNG, 5 cm pixels, 5 m grid) with the mapped
+    /// path (blue) and the log's own path (red).
+    #[arg(long, value_name = "FILE")]
+    pub picture: Option<PathBuf>,
+    /// 2D logs: map only the first N scans.
+    #[arg(long, value_name = "N")]
+    pub max_scans: Option<usize>,
+    /// 2D logs: write the pose graph (nodes = scans, odometry, registration and loop-closure
+    /// edges with their information) as a g2o file.
+    #[arg(long, value_name = "FILE")]
+    pub graph_out: Option<PathBuf>,
     #[command(flatten)]
     pub threads: ThreadsArgs,
     /// Print a JSON summary instead of text.
@@ -129,7 +160,26 @@ fn map_params(a: &MapArgs) -> anyhow::Result<MapParams> {
 /// Runs `olmap map`.
 pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
     set_threads(a.threads.threads)?;
-    MapFormat::of_output(&a.output)?;
+    if let [log] = a.scans.as_slice() {
+        if io::carmen::is_carmen_path(log) {
+            return run_log(a, log);
+        }
+    }
+    if a.graph_out.is_some()
+        || a.picture.is_some()
+        || a.no_loop_closure
+        || a.max_scans.is_some()
+        || a.inject_wrong_closures != 0.0
+    {
+        bail!(
+            "--graph-out, --picture, --no-loop-closure, --max-scans and --inject-wrong-closures \
+             are for 2D logs (one CARMEN .log/.log.gz), so far"
+        );
+    }
+    let Some(output) = &a.output else {
+        bail!("--output (-o) is required: the map file (.olm or .bt) to write");
+    };
+    MapFormat::of_output(output)?;
     let job = MapJob {
         scans: io::scan_files(&a.scans, a.list.as_deref())?,
         odometry: match a.odometry.as_deref() {
@@ -143,7 +193,7 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
         },
         first: a.first.clone(),
         params: map_params(a)?,
-        output: a.output.clone(),
+        output: output.clone(),
         poses_out: a.poses_out.clone(),
         scans_out: a.scans_out.clone(),
         report: a.report.clone(),
@@ -165,7 +215,7 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
             built.seconds,
             built.map.len(),
             a.resolution,
-            a.output.display()
+            output.display()
         );
         for p in &built.placed {
             let t = p.pose.translation();
@@ -184,6 +234,118 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
         for r in &built.rejected {
             println!("  {:<20} REJECTED: {}", r.name, r.reasons.join("; "));
         }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `olmap map LOG.log.gz`: a 2D log mapped in x-y-yaw with
+/// [`olmap::mapping::planar::run_planar_log`].
+fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
+    if matches!(a.dof.dof, crate::args::DofArg::SixDof) {
+        bail!(
+            "{}: a 2D laser log is mapped in x-y-yaw, not 6dof",
+            log.display()
+        );
+    }
+    if a.list.is_some() || a.odometry.is_some() || a.scans_out.is_some() || a.report.is_some() {
+        // (those are the 3D pipeline's inputs and outputs)
+        bail!(
+            "{}: --list, --odometry, --scans-out and --report are for scan files; a 2D log \
+             carries its own poses (degraded with --odometry-noise)",
+            log.display()
+        );
+    }
+    let [frac, deg] = crate::args::parse_numbers::<2>(&a.odometry_noise, "--odometry-noise")?;
+    let mut params = PlanarMapParams::default();
+    if a.no_loop_closure {
+        params.closure = None;
+    }
+    let job = PlanarLogJob {
+        log: log.to_path_buf(),
+        max_scans: a.max_scans,
+        max_range: a.max_range,
+        noise: OdometryNoise {
+            distance_fraction: frac,
+            degrees_per_unit: deg,
+        },
+        noise_seed: a.noise_seed,
+        params,
+        poses_out: a.poses_out.clone(),
+        graph_out: a.graph_out.clone(),
+        map_out: a.output.clone(),
+        picture_out: a.picture.clone(),
+        inject_wrong_closures: a.inject_wrong_closures,
+    };
+    let mut bars = StageBars::new(a.json);
+    let report = run_planar_log(&job, &mut |done, total| {
+        bars.update(olmap::progress::Stage::Map, done, total)
+    })?;
+    bars.finish();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let e = &report.errors;
+    let o = &report.odometry_errors;
+    println!(
+        "{} of {} scans placed in {:.2} s ({:.1} ms per scan); loop closure {}",
+        report.placed,
+        report.scans,
+        report.seconds,
+        report.ms_per_scan,
+        if report.loop_closure { "on" } else { "off" }
+    );
+    println!("  placed by: {:?}", report.sources);
+    println!("  graph edges: {:?}", report.edges);
+    if report.loop_closure {
+        println!(
+            "  loop closures: {} tried, {} accepted, {} down-weighted by the robust kernel",
+            report.closures_tried,
+            report.closures_accepted,
+            report.closures_down_weighted.len()
+        );
+    }
+    if !report.injected_closures.is_empty() {
+        let caught = report
+            .injected_closures
+            .iter()
+            .filter(|c| c.down_weighted)
+            .count();
+        println!(
+            "  injected wrong closures: {} of {} down-weighted by the kernel",
+            caught,
+            report.injected_closures.len()
+        );
+        for c in report.injected_closures.iter().filter(|c| !c.down_weighted) {
+            println!(
+                "    NOT caught: {} -> {} ({:.2} m off)",
+                c.from, c.to, c.offset_m
+            );
+        }
+    }
+    println!(
+        "  final solve: cost {:.4} -> {:.4}",
+        report.initial_cost, report.final_cost
+    );
+    println!(
+        "  against the log's corrected poses (odometry noise {} / {} deg, seed {}):",
+        frac, deg, report.noise_seed
+    );
+    println!(
+        "  {:<10} {:>10} {:>10} {:>10} {:>10} {:>11} {:>11}",
+        "", "ATE rms m", "ATE max m", "yaw rms", "yaw max", "rel 1m rms", "rel 10m rms"
+    );
+    for (what, x) in [("mapped", e), ("odometry", o)] {
+        println!(
+            "  {:<10} {:>10.3} {:>10.3} {:>10.2} {:>10.2} {:>11.3} {:>11.3}",
+            what,
+            x.ate_rmse_m,
+            x.ate_max_m,
+            x.yaw_rmse_deg,
+            x.yaw_max_deg,
+            x.relative_1m_rmse_m,
+            x.relative_10m_rmse_m
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

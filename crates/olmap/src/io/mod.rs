@@ -20,6 +20,7 @@
 //! [`ReadReport::dropped_non_finite`]. Writers write to a temporary file beside the target
 //! and rename it into place, so a failed write never leaves a half-written file.
 
+pub mod carmen;
 pub mod csv;
 mod discover;
 pub mod kitti;
@@ -360,6 +361,58 @@ pub fn read_bzip2_cloud_from<R: BufRead>(
     Ok(loaded)
 }
 
+/// A text stream opened from a file that may be compressed: gzip (`.gz` or the gzip magic
+/// bytes) or bzip2 (`.bz2` or `BZh`), decompressed on the fly and capped at
+/// [`max_decompressed_bytes`] of the compressed size. Returns the stream, the compression's
+/// name (if any) and the file's size on disk. Used by the log readers ([`carmen`]).
+pub(crate) fn open_text(path: &Path) -> Result<(Box<dyn BufRead>, Option<&'static str>, u64)> {
+    let mut reader = open_buffered(path)?;
+    let size = reader.get_ref().metadata().map_or(0, |m| m.len());
+    let limit = max_decompressed_bytes(size);
+    if has_extension(path, "gz") || starts_with(&mut reader, path, &[0x1f, 0x8b])? {
+        return Ok((gzip_capped(reader, path, limit)?, Some("gzip"), size));
+    }
+    if has_extension(path, "bz2") || starts_with(&mut reader, path, b"BZh")? {
+        #[cfg(feature = "bzip2")]
+        return Ok((Box::new(bzip2_capped(reader, limit)), Some("bzip2"), size));
+        #[cfg(not(feature = "bzip2"))]
+        return Err(Error::UnknownFormat {
+            path: path.to_path_buf(),
+            reason: "bzip2-compressed, but olmap was built without the `bzip2` feature".into(),
+        });
+    }
+    Ok((Box::new(reader), None, size))
+}
+
+/// A gzip decoder (all members) over `reader` producing at most `limit` bytes, buffered.
+#[cfg(feature = "gzip")]
+fn gzip_capped<R: BufRead + 'static>(
+    reader: R,
+    _path: &Path,
+    limit: u64,
+) -> Result<Box<dyn BufRead>> {
+    Ok(Box::new(BufReader::with_capacity(
+        1 << 18,
+        CappedReader {
+            inner: flate2::bufread::MultiGzDecoder::new(reader),
+            produced: 0,
+            limit,
+        },
+    )))
+}
+
+#[cfg(not(feature = "gzip"))]
+fn gzip_capped<R: BufRead + 'static>(
+    _reader: R,
+    path: &Path,
+    _limit: u64,
+) -> Result<Box<dyn BufRead>> {
+    Err(Error::UnknownFormat {
+        path: path.to_path_buf(),
+        reason: "gzip-compressed, but olmap was built without the `gzip` feature".into(),
+    })
+}
+
 /// A reader that refuses to produce more than `limit` bytes: past it, a read fails with
 /// [`DecompressionLimit`] (the stream's end exactly at the limit is fine).
 struct CappedReader<R> {
@@ -406,7 +459,7 @@ impl<R: std::io::Read> std::io::Read for CappedReader<R> {
 
 /// Turns a parser's read failure caused by a [`CappedReader`] into [`ParseError::TooLarge`]
 /// (other errors pass through).
-fn decompression_limit(e: ParseError, compressed: u64) -> ParseError {
+pub(crate) fn decompression_limit(e: ParseError, compressed: u64) -> ParseError {
     let limit = match &e {
         ParseError::Io(io) => io
             .get_ref()
@@ -417,7 +470,7 @@ fn decompression_limit(e: ParseError, compressed: u64) -> ParseError {
     match limit {
         Some(limit) => ParseError::TooLarge {
             what: format!(
-                "the bzip2 data ({compressed} bytes compressed) decompresses to more than {limit} \
+                "the compressed data ({compressed} bytes on disk) decompresses to more than {limit} \
                  bytes"
             ),
             limit: format!(

@@ -15,7 +15,8 @@ pub fn file_stem_name(path: &Path) -> String {
 
 /// Reads the poses of any supported pose file, by extension: 3DTK `.pose` (one pose named
 /// by the file stem), 3DTK `.frames` (the final frame, named by the file stem), CSV pose
-/// tables (`.csv`, libpointmatcher's `carCloudList.csv`), and otherwise an olmap pose list
+/// tables (`.csv`, libpointmatcher's `carCloudList.csv`), CARMEN logs (`.log`, `.log.gz`:
+/// the `FLASER` poses, named `scan000000`, …; see [`super::carmen`]), and otherwise an olmap pose list
 /// (name + row-major 3x4 of `T_map_scan` per line; KITTI `poses.txt` too). Everything in
 /// right-handed metres.
 ///
@@ -48,6 +49,9 @@ pub fn read_poses_with(path: impl AsRef<Path>, all_frames: bool) -> Result<PoseL
         path.file_stem()
             .map_or_else(|| "pose".into(), |s| s.to_string_lossy().into_owned())
     };
+    if super::carmen::is_carmen_path(path) {
+        return Ok(super::carmen::read_carmen(path)?.poses());
+    }
     match ext.as_str() {
         "pose" => list.push(stem(), slam6d::read_pose_path(path)?),
         "frames" => {

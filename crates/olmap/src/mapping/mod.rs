@@ -9,6 +9,7 @@ mod html;
 mod input;
 mod links;
 mod pipeline;
+pub mod planar;
 mod report;
 
 pub use builder::{

@@ -16,6 +16,7 @@ mod mapping;
 mod mutual;
 mod occupancy;
 mod pipelines;
+mod planar;
 mod real_data;
 #[cfg(feature = "render")]
 mod render;

@@ -1,0 +1,724 @@
+//! The incremental planar mapper: scans arrive one at a time ([`PlanarMapper::add_scan`]),
+//! each is registered onto a local map of the last scans from its odometry guess, becomes
+//! a node of an SE(2) pose graph with odometry and registration edges, and is tried as a
+//! loop closure against earlier parts of the map; each accepted closure re-optimises the
+//! graph, which moves earlier scans.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Matrix3, Vector2};
+use serde::Serialize;
+
+use super::correlative::{search, CorrelativeMatch, CorrelativeParams, ScoreGrid};
+use super::icp::{LineTarget, PlanarIcpParams, PlanarIcpResult};
+use super::odometry::OdometryNoise;
+use crate::error::Result;
+use crate::graph::{EdgeKind, Init, Kernel, PoseGraph, Se2, SolveParams, SolveReport, Space};
+use rustc_hash::FxHashMap as FxMap;
+
+/// When a registration is good enough to place a scan or close a loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegistrationGate {
+    /// Least share of the scan's points within the inlier distance of a target line.
+    pub min_inlier_fraction: f64,
+    /// Least number of such points.
+    pub min_inliers: usize,
+    /// Least [`PlanarIcpResult::weakest_translation`]: how well the weakest direction is
+    /// held (a corridor's direction along it is not).
+    pub min_weakest_translation: f64,
+}
+
+impl RegistrationGate {
+    /// Why `r` fails the gate, or `None` when it passes.
+    pub fn doubt(&self, r: &PlanarIcpResult) -> Option<String> {
+        if !r.converged {
+            return Some(format!(
+                "refinement did not converge in {} iterations",
+                r.iterations
+            ));
+        }
+        if r.inliers < self.min_inliers {
+            return Some(format!("{} inliers < {}", r.inliers, self.min_inliers));
+        }
+        if r.inlier_fraction() < self.min_inlier_fraction {
+            return Some(format!(
+                "inlier fraction {:.2} < {:.2}",
+                r.inlier_fraction(),
+                self.min_inlier_fraction
+            ));
+        }
+        if r.weakest_translation() < self.min_weakest_translation {
+            return Some(format!(
+                "translation poorly held in one direction ({:.3} < {:.3}: a corridor?)",
+                r.weakest_translation(),
+                self.min_weakest_translation
+            ));
+        }
+        None
+    }
+}
+
+/// How loop closures are found and accepted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosureParams {
+    /// Candidates: earlier scans whose estimated position is within this of the new
+    /// scan's, metres.
+    pub radius: f64,
+    /// … and that were left at least this far back along the path, metres.
+    pub min_travel: f64,
+    /// A closure is tried once per this much travel, metres.
+    pub every_travel: f64,
+    /// Most candidates tried per attempt (the nearest, from different stretches of path).
+    pub max_candidates: usize,
+    /// A candidate's local map: the candidate and this many scans either side.
+    pub neighbourhood: usize,
+    /// The correlative search around the current estimate.
+    pub search: CorrelativeParams,
+    /// Least correlative score (mean blurred-image value, 0 to 1).
+    pub min_score: f64,
+    /// Most `runner_up / best` of the correlative search: above it the place is ambiguous.
+    pub max_ambiguity: f64,
+    /// The refinement's gate.
+    pub gate: RegistrationGate,
+    /// The robust kernel of closure edges.
+    pub kernel: Kernel,
+    /// How fast the estimate may drift away from the truth while no loop is closed, metres
+    /// per metre travelled: the candidate radius and the search window grow by this times
+    /// the travel since the last accepted closure …
+    pub drift_per_metre: f64,
+    /// … up to this, metres (for the window; the radius grows up to 2x this) …
+    pub max_window_xy: f64,
+    /// … and the heading window grows by this many degrees per metre, up to
+    /// `max_window_yaw_deg`.
+    pub yaw_drift_deg_per_metre: f64,
+    /// See `yaw_drift_deg_per_metre`.
+    pub max_window_yaw_deg: f64,
+}
+
+impl Default for ClosureParams {
+    fn default() -> Self {
+        ClosureParams {
+            radius: 3.0,
+            min_travel: 5.0,
+            every_travel: 0.5,
+            max_candidates: 3,
+            neighbourhood: 5,
+            search: CorrelativeParams::default(),
+            min_score: 0.45,
+            max_ambiguity: 0.85,
+            gate: RegistrationGate {
+                min_inlier_fraction: 0.5,
+                min_inliers: 50,
+                min_weakest_translation: 0.1,
+            },
+            kernel: Kernel::Dcs(10.0),
+            drift_per_metre: 0.05,
+            max_window_xy: 6.0,
+            yaw_drift_deg_per_metre: 0.2,
+            max_window_yaw_deg: 30.0,
+        }
+    }
+}
+
+/// Parameters of the planar mapper.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarMapParams {
+    /// The refinement.
+    pub icp: PlanarIcpParams,
+    /// Scans in the local map a new scan is registered onto.
+    pub local_map_scans: usize,
+    /// Grid size for thinning scans and local maps, metres.
+    pub voxel: f64,
+    /// The correlative search around the odometry guess that precedes each sequential
+    /// refinement (it catches what a gradient method from a poor guess would not).
+    pub search: CorrelativeParams,
+    /// The gate of sequential registration.
+    pub gate: RegistrationGate,
+    /// The odometry's error model, for the information of odometry edges.
+    pub odometry_noise: OdometryNoise,
+    /// Registration information = `H / max(rmse, sigma_floor)² × information_scale`.
+    pub information_scale: f64,
+    /// See `information_scale`, metres.
+    pub sigma_floor: f64,
+    /// Loop closure; `None` = odometry and sequential registration only.
+    pub closure: Option<ClosureParams>,
+}
+
+impl Default for PlanarMapParams {
+    fn default() -> Self {
+        PlanarMapParams {
+            icp: PlanarIcpParams::default(),
+            local_map_scans: 10,
+            voxel: 0.05,
+            search: CorrelativeParams {
+                window_xy: 0.5,
+                window_yaw_deg: 10.0,
+                ..CorrelativeParams::default()
+            },
+            gate: RegistrationGate {
+                min_inlier_fraction: 0.2,
+                min_inliers: 25,
+                min_weakest_translation: 0.02,
+            },
+            odometry_noise: OdometryNoise {
+                distance_fraction: 0.05,
+                degrees_per_unit: 2.0,
+            },
+            information_scale: 0.1,
+            sigma_floor: 0.01,
+            closure: Some(ClosureParams::default()),
+        }
+    }
+}
+
+/// Where a scan's pose came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlacementSource {
+    /// The first scan: it defines the map frame (at its odometry pose, if any).
+    First,
+    /// Registration onto the local map.
+    Registration,
+    /// Odometry alone (the registration was refused; the reason is in `doubt`).
+    Odometry,
+}
+
+/// What [`PlanarMapper::add_scan`] did with one scan.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Placement {
+    /// The scan's index in arrival order.
+    pub index: usize,
+    /// The scan's name.
+    pub name: String,
+    /// Whether the scan is in the map (false: no odometry and no trusted registration).
+    pub placed: bool,
+    /// Its pose when placed (later closures may move it; see [`PlanarMapper::poses`]).
+    pub pose: Se2,
+    /// Where the pose came from.
+    pub source: PlacementSource,
+    /// The sequential registration's inlier fraction (0 without one).
+    pub inlier_fraction: f64,
+    /// Why the registration was not used, if it was not.
+    pub doubt: Option<String>,
+    /// Loop closures tried for this scan.
+    pub closures: Vec<ClosureAttempt>,
+}
+
+/// One loop-closure attempt.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClosureAttempt {
+    /// The earlier scan (the candidate's centre).
+    pub from: usize,
+    /// The new scan.
+    pub to: usize,
+    /// Whether an edge was added.
+    pub accepted: bool,
+    /// The correlative score and ambiguity.
+    pub score: f64,
+    /// `runner_up / best` of the correlative search.
+    pub ambiguity: f64,
+    /// The refinement's inlier fraction.
+    pub inlier_fraction: f64,
+    /// How far the closure moves the new scan from its estimate, metres.
+    pub correction_m: f64,
+    /// Why it was refused, if it was.
+    pub reason: Option<String>,
+    /// The edge's index in the graph when accepted.
+    #[serde(skip)]
+    pub edge: Option<usize>,
+}
+
+struct StoredScan {
+    name: String,
+    points: Vec<Vector2<f64>>,
+    odometry: Option<Se2>,
+    node: Option<u64>,
+    travel: f64,
+}
+
+/// The incremental planar mapper (see the module documentation).
+///
+/// ```
+/// use nalgebra::Vector2;
+/// use olmap::graph::Se2;
+/// use olmap::mapping::planar::{PlanarMapParams, PlanarMapper};
+/// // A robot driving 2 m along a room 6 m x 4 m, seeing its four walls.
+/// let walls: Vec<Vector2<f64>> = (0..120)
+///     .flat_map(|i| {
+///         let s = i as f64 * 0.05;
+///         [Vector2::new(s - 3.0, -2.0), Vector2::new(s - 3.0, 2.0),
+///          Vector2::new(-3.0, s / 1.5 - 2.0), Vector2::new(3.0, s / 1.5 - 2.0)]
+///     })
+///     .collect();
+/// let mut mapper = PlanarMapper::new(PlanarMapParams { closure: None, ..Default::default() });
+/// for k in 0..5 {
+///     let truth = Se2::new(0.5 * k as f64 - 1.0, 0.0, 0.0);
+///     let seen: Vec<Vector2<f64>> = walls.iter().map(|p| p - Vector2::new(truth.x, truth.y)).collect();
+///     // Odometry that under-reads by 10 %: registration corrects it.
+///     let odometry = Se2::new(0.45 * k as f64 - 1.0, 0.0, 0.0);
+///     let placed = mapper.add_scan(format!("s{k}"), seen, Some(odometry)).unwrap();
+///     assert!(placed.placed);
+/// }
+/// let last = mapper.poses()[4].1;
+/// assert!((last.x - 1.0).abs() < 0.01, "{last:?}");
+/// ```
+pub struct PlanarMapper {
+    params: PlanarMapParams,
+    graph: PoseGraph,
+    scans: Vec<StoredScan>,
+    last_placed: Option<usize>,
+    node_to_scan: FxMap<u64, usize>,
+    closure_attempts_at: f64,
+    last_closure_travel: f64,
+    optimisations: usize,
+}
+
+impl PlanarMapper {
+    /// An empty mapper.
+    pub fn new(params: PlanarMapParams) -> PlanarMapper {
+        PlanarMapper {
+            params,
+            graph: PoseGraph::new(Space::Se2),
+            scans: Vec::new(),
+            last_placed: None,
+            node_to_scan: FxMap::default(),
+            closure_attempts_at: f64::NEG_INFINITY,
+            last_closure_travel: 0.0,
+            optimisations: 0,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &PlanarMapParams {
+        &self.params
+    }
+
+    /// The pose graph (nodes = placed scans by index, edges by kind).
+    pub fn graph(&self) -> &PoseGraph {
+        &self.graph
+    }
+
+    /// Graph solves run so far (one per scan that closed a loop).
+    pub fn optimisations(&self) -> usize {
+        self.optimisations
+    }
+
+    /// The current poses of the placed scans, `(name, T_map_scan)`, in arrival order.
+    pub fn poses(&self) -> Vec<(String, Se2)> {
+        self.scans
+            .iter()
+            .filter_map(|s| {
+                let id = s.node?;
+                Some((s.name.clone(), self.graph.pose_se2(id)?))
+            })
+            .collect()
+    }
+
+    /// The map: every placed scan's (thinned) points in the map frame.
+    pub fn map_points(&self) -> Vec<Vector2<f64>> {
+        let mut out = Vec::new();
+        for s in &self.scans {
+            let Some(pose) = s.node.and_then(|id| self.graph.pose_se2(id)) else {
+                continue;
+            };
+            out.extend(s.points.iter().map(|p| transform(&pose, p)));
+        }
+        out
+    }
+
+    /// Re-solves the whole graph (warm start) and returns the solver's final cost.
+    pub fn optimise(&mut self) -> Result<f64> {
+        Ok(self.optimise_report()?.final_cost)
+    }
+
+    /// [`PlanarMapper::optimise`] with the solver's whole report (costs, per-edge weights).
+    pub fn optimise_report(&mut self) -> Result<SolveReport> {
+        self.optimisations += 1;
+        self.graph.optimise(&solve_params())
+    }
+
+    /// Places one scan: `points` in the scan's frame (metres), `odometry` its odometry
+    /// pose if the robot has one (`T_odom_scan`; only differences between scans are used).
+    pub fn add_scan(
+        &mut self,
+        name: String,
+        points: Vec<Vector2<f64>>,
+        odometry: Option<Se2>,
+    ) -> Result<Placement> {
+        let index = self.scans.len();
+        let points = thin(&points, self.params.voxel);
+        let mut placement = Placement {
+            index,
+            name: name.clone(),
+            placed: false,
+            pose: Se2::default(),
+            source: PlacementSource::First,
+            inlier_fraction: 0.0,
+            doubt: None,
+            closures: Vec::new(),
+        };
+        let Some(prev) = self.last_placed else {
+            let pose = odometry.unwrap_or_default();
+            let id = index as u64;
+            self.graph.add_node_se2(id, pose)?;
+            self.graph.set_fixed(id, true)?;
+            self.node_to_scan.insert(id, index);
+            self.scans.push(StoredScan {
+                name,
+                points,
+                odometry,
+                node: Some(id),
+                travel: 0.0,
+            });
+            self.last_placed = Some(index);
+            placement.placed = true;
+            placement.pose = pose;
+            return Ok(placement);
+        };
+        let prev_id = self.scans[prev].node.expect("placed");
+        let prev_pose = self.graph.pose_se2(prev_id).expect("node");
+        let odo_step = match (self.scans[prev].odometry, odometry) {
+            (Some(a), Some(b)) => Some(a.inverse().compose(&b)),
+            _ => None,
+        };
+        // Register onto the local map, expressed in the previous scan's frame.
+        let local = self.local_map(prev, &prev_pose);
+        let guess = odo_step.unwrap_or_default();
+        let reg = self.register(&local, &points, guess, &self.params.search);
+        let reg = reg.map(|(r, _)| r);
+        let doubt = match &reg {
+            None => Some("the local map has too few points".to_string()),
+            Some(r) => self.params.gate.doubt(r),
+        };
+        placement.inlier_fraction = reg.as_ref().map_or(0.0, |r| r.inlier_fraction());
+        let step = match (&reg, &doubt, odo_step) {
+            (Some(r), None, _) => {
+                placement.source = PlacementSource::Registration;
+                r.pose
+            }
+            (_, _, Some(o)) => {
+                placement.source = PlacementSource::Odometry;
+                o
+            }
+            _ => {
+                placement.doubt = doubt;
+                self.scans.push(StoredScan {
+                    name,
+                    points,
+                    odometry,
+                    node: None,
+                    travel: self.scans[prev].travel,
+                });
+                return Ok(placement);
+            }
+        };
+        placement.doubt = doubt.clone();
+        let pose = prev_pose.compose(&step);
+        let id = index as u64;
+        self.graph.add_node_se2(id, pose)?;
+        self.node_to_scan.insert(id, index);
+        if let Some(o) = odo_step {
+            let info = self.params.odometry_noise.information(&o);
+            self.graph
+                .add_edge_se2(prev_id, id, EdgeKind::Odometry, o, info, Kernel::None)?;
+        }
+        if let (Some(r), None) = (&reg, &doubt) {
+            let info = r.information(self.params.sigma_floor, self.params.information_scale);
+            self.graph.add_edge_se2(
+                prev_id,
+                id,
+                EdgeKind::Registration,
+                r.pose,
+                symmetric(info),
+                Kernel::None,
+            )?;
+        }
+        let travel = self.scans[prev].travel + step.x.hypot(step.y);
+        self.scans.push(StoredScan {
+            name,
+            points,
+            odometry,
+            node: Some(id),
+            travel,
+        });
+        self.last_placed = Some(index);
+        placement.placed = true;
+        placement.pose = pose;
+        if let Some(cp) = self.params.closure {
+            if travel - self.closure_attempts_at >= cp.every_travel {
+                self.closure_attempts_at = travel;
+                placement.closures = self.try_closures(index, &cp)?;
+                if placement.closures.iter().any(|c| c.accepted) {
+                    self.last_closure_travel = travel;
+                    self.optimise()?;
+                }
+            }
+        }
+        Ok(placement)
+    }
+
+    /// Points of the last `local_map_scans` placed scans up to `last`, in the frame of
+    /// `last` (whose pose is `last_pose`), thinned.
+    fn local_map(&self, last: usize, last_pose: &Se2) -> Vec<Vector2<f64>> {
+        let inv = last_pose.inverse();
+        let mut pts = Vec::new();
+        let mut taken = 0;
+        for s in self.scans[..=last].iter().rev() {
+            if taken == self.params.local_map_scans {
+                break;
+            }
+            let Some(pose) = s.node.and_then(|id| self.graph.pose_se2(id)) else {
+                continue;
+            };
+            let rel = inv.compose(&pose);
+            pts.extend(s.points.iter().map(|p| transform(&rel, p)));
+            taken += 1;
+        }
+        thin(&pts, self.params.voxel)
+    }
+
+    /// Correlative search of `source` on `target` around `guess`, then point-to-line ICP
+    /// from its best pose; `None` when the target is too small to use.
+    fn register(
+        &self,
+        target: &[Vector2<f64>],
+        source: &[Vector2<f64>],
+        guess: Se2,
+        search_params: &CorrelativeParams,
+    ) -> Option<(PlanarIcpResult, CorrelativeMatch)> {
+        let fine_sigma = 2.0 * self.params.voxel;
+        let grid = ScoreGrid::new(target, self.params.voxel, fine_sigma)?;
+        let lines = LineTarget::new(target.to_vec(), &self.params.icp)?;
+        let m = if search_params.step_xy > fine_sigma {
+            // Coarse steps: search a blur as wide as the step (so no peak falls between
+            // steps), then search the best coarse cell finely. The ambiguity is the coarse
+            // surface's: that is where distinct alternatives across the window show.
+            let coarse_grid =
+                ScoreGrid::new(target, self.params.voxel, search_params.step_xy / 1.5)?;
+            let coarse = search(&coarse_grid, source, guess, search_params);
+            let fine = CorrelativeParams {
+                window_xy: search_params.step_xy,
+                window_yaw_deg: search_params.step_yaw_deg,
+                step_xy: self.params.voxel,
+                step_yaw_deg: 0.5,
+                ..*search_params
+            };
+            let m = search(&grid, source, coarse.pose, &fine);
+            CorrelativeMatch {
+                runner_up: m.score * coarse.ambiguity(),
+                ..m
+            }
+        } else {
+            search(&grid, source, guess, search_params)
+        };
+        Some((lines.register(source, m.pose, &self.params.icp), m))
+    }
+
+    /// The closure search window for a scan at `travel`: the base window grown with the
+    /// travel since the last accepted closure (the drift the estimate may have gathered),
+    /// with coarser steps when it grows large so the search stays cheap (the refinement
+    /// takes the answer to full precision).
+    fn closure_window(&self, travel: f64, cp: &ClosureParams) -> CorrelativeParams {
+        let since = (travel - self.last_closure_travel).max(0.0);
+        let mut w = cp.search;
+        w.window_xy =
+            (w.window_xy + cp.drift_per_metre * since).min(cp.max_window_xy.max(w.window_xy));
+        w.window_yaw_deg = (w.window_yaw_deg + cp.yaw_drift_deg_per_metre * since)
+            .min(cp.max_window_yaw_deg.max(w.window_yaw_deg));
+        // Keep about 41 steps across in x-y and 31 in heading.
+        let cells = (w.window_xy / 20.0 / self.params.voxel).ceil().max(1.0);
+        w.step_xy = w.step_xy.max(cells * self.params.voxel);
+        w.step_yaw_deg = w.step_yaw_deg.max(w.window_yaw_deg / 15.0);
+        w
+    }
+
+    /// Tries loop closures from scan `i` onto earlier stretches of the path.
+    fn try_closures(&mut self, i: usize, cp: &ClosureParams) -> Result<Vec<ClosureAttempt>> {
+        let node_i = self.scans[i].node.expect("placed");
+        let pose_i = self.graph.pose_se2(node_i).expect("node");
+        let travel_i = self.scans[i].travel;
+        let search = self.closure_window(travel_i, cp);
+        let radius = cp.radius + (search.window_xy - cp.search.window_xy);
+        let mut candidates: Vec<(f64, usize)> = self
+            .scans
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.node.is_some() && travel_i - s.travel >= cp.min_travel)
+            .filter_map(|(j, s)| {
+                let p = self.graph.pose_se2(s.node?)?;
+                let d = (p.x - pose_i.x).hypot(p.y - pose_i.y);
+                (d <= radius).then_some((d, j))
+            })
+            .collect();
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut chosen: Vec<usize> = Vec::new();
+        for (_, j) in candidates {
+            if chosen.len() == cp.max_candidates {
+                break;
+            }
+            if chosen.iter().all(|&c| c.abs_diff(j) > 2 * cp.neighbourhood) {
+                chosen.push(j);
+            }
+        }
+        let mut attempts = Vec::new();
+        for j in chosen {
+            attempts.push(self.try_closure(j, i, &pose_i, cp, &search)?);
+        }
+        Ok(attempts)
+    }
+
+    fn try_closure(
+        &mut self,
+        j: usize,
+        i: usize,
+        pose_i: &Se2,
+        cp: &ClosureParams,
+        window: &CorrelativeParams,
+    ) -> Result<ClosureAttempt> {
+        let node_j = self.scans[j].node.expect("placed");
+        let pose_j = self.graph.pose_se2(node_j).expect("node");
+        let inv_j = pose_j.inverse();
+        let travel_i = self.scans[i].travel;
+        let lo = j.saturating_sub(cp.neighbourhood);
+        let hi = (j + cp.neighbourhood).min(self.scans.len() - 1);
+        let mut pts = Vec::new();
+        for s in &self.scans[lo..=hi] {
+            if travel_i - s.travel < cp.min_travel / 2.0 {
+                continue;
+            }
+            let Some(p) = s.node.and_then(|id| self.graph.pose_se2(id)) else {
+                continue;
+            };
+            let rel = inv_j.compose(&p);
+            pts.extend(s.points.iter().map(|q| transform(&rel, q)));
+        }
+        let pts = thin(&pts, self.params.voxel);
+        let guess = inv_j.compose(pose_i);
+        let mut attempt = ClosureAttempt {
+            from: j,
+            to: i,
+            accepted: false,
+            score: 0.0,
+            ambiguity: 1.0,
+            inlier_fraction: 0.0,
+            correction_m: 0.0,
+            reason: None,
+            edge: None,
+        };
+        let Some((r, m)) = self.register(&pts, &self.scans[i].points, guess, window) else {
+            attempt.reason = Some("the candidate's local map is empty".into());
+            return Ok(attempt);
+        };
+        attempt.score = m.score;
+        attempt.ambiguity = m.ambiguity();
+        attempt.inlier_fraction = r.inlier_fraction();
+        attempt.correction_m = (r.pose.x - guess.x).hypot(r.pose.y - guess.y);
+        attempt.reason = if m.score < cp.min_score {
+            Some(format!("score {:.2} < {:.2}", m.score, cp.min_score))
+        } else if m.ambiguity() > cp.max_ambiguity {
+            Some(format!(
+                "ambiguous: a distinct pose scores {:.0} % of the best",
+                100.0 * m.ambiguity()
+            ))
+        } else {
+            cp.gate.doubt(&r)
+        };
+        if attempt.reason.is_none() {
+            let info = r.information(self.params.sigma_floor, self.params.information_scale);
+            let node_i = self.scans[i].node.expect("placed");
+            attempt.edge = Some(self.graph.add_edge_se2(
+                node_j,
+                node_i,
+                EdgeKind::LoopClosure,
+                r.pose,
+                symmetric(info),
+                cp.kernel,
+            )?);
+            attempt.accepted = true;
+        }
+        Ok(attempt)
+    }
+
+    /// Adds a loop-closure edge `T_from_to` by hand, with the information and kernel the
+    /// accepted closures get (the first accepted closure's information; `None` when no
+    /// closure was accepted yet). For robustness tests: a wrong closure injected this way
+    /// must be down-weighted by the kernel at the next solve.
+    pub fn add_closure_edge(
+        &mut self,
+        from: usize,
+        to: usize,
+        t_from_to: Se2,
+    ) -> Result<Option<usize>> {
+        let Some(cp) = self.params.closure else {
+            return Ok(None);
+        };
+        let info = self
+            .graph
+            .edges()
+            .iter()
+            .find_map(|e| match (e.kind, e.measurement) {
+                (EdgeKind::LoopClosure, crate::graph::Measurement::Se2 { information, .. }) => {
+                    Some(information)
+                }
+                _ => None,
+            });
+        let (Some(info), Some(a), Some(b)) = (info, self.scans[from].node, self.scans[to].node)
+        else {
+            return Ok(None);
+        };
+        Ok(Some(self.graph.add_edge_se2(
+            a,
+            b,
+            EdgeKind::LoopClosure,
+            t_from_to,
+            info,
+            cp.kernel,
+        )?))
+    }
+
+    /// The current pose of scan `index`, if placed.
+    pub fn pose_of(&self, index: usize) -> Option<Se2> {
+        self.graph.pose_se2(self.scans.get(index)?.node?)
+    }
+
+    /// Edge counts by kind.
+    pub fn edge_counts(&self) -> BTreeMap<EdgeKind, usize> {
+        self.graph.edge_counts()
+    }
+
+    /// The scan index of a graph node.
+    pub fn scan_of_node(&self, node: u64) -> Option<usize> {
+        self.node_to_scan.get(&node).copied()
+    }
+}
+
+fn solve_params() -> SolveParams {
+    SolveParams {
+        max_iterations: 30,
+        init: Init::None,
+        function_tolerance: 1e-9,
+        ..Default::default()
+    }
+}
+
+fn symmetric(m: Matrix3<f64>) -> Matrix3<f64> {
+    (m + m.transpose()) * 0.5
+}
+
+fn transform(pose: &Se2, p: &Vector2<f64>) -> Vector2<f64> {
+    let (s, c) = pose.theta.sin_cos();
+    Vector2::new(c * p.x - s * p.y + pose.x, s * p.x + c * p.y + pose.y)
+}
+
+/// One point per occupied `voxel` cell (the first one met), order kept.
+pub fn thin(points: &[Vector2<f64>], voxel: f64) -> Vec<Vector2<f64>> {
+    if voxel <= 0.0 {
+        return points.to_vec();
+    }
+    let mut seen = rustc_hash::FxHashSet::default();
+    points
+        .iter()
+        .filter(|p| seen.insert(((p.x / voxel).floor() as i64, (p.y / voxel).floor() as i64)))
+        .copied()
+        .collect()
+}
