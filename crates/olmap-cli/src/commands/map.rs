@@ -288,11 +288,12 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
     let e = &report.errors;
     let o = &report.odometry_errors;
     println!(
-        "{} of {} scans placed in {:.2} s ({:.1} ms per scan); loop closure {}",
+        "{} of {} scans placed in {:.2} s ({:.1} ms per scan, slowest {:.0} ms); loop closure {}",
         report.placed,
         report.scans,
         report.seconds,
         report.ms_per_scan,
+        report.max_ms_per_scan,
         if report.loop_closure { "on" } else { "off" }
     );
     println!("  placed by: {:?}", report.sources);
