@@ -140,6 +140,11 @@ pub struct PlanarMapParams {
     pub information_scale: f64,
     /// See `information_scale`, metres.
     pub sigma_floor: f64,
+    /// The least uncertainty a registration edge claims, `(metres, degrees)`: this
+    /// covariance is added to the one from the ICP Hessian (scan matching is never better
+    /// than its model: beam-angle and range biases, moving people), so a registration cannot
+    /// overrule good odometry by an arbitrary factor. `(0, 0)`: none.
+    pub registration_floor: (f64, f64),
     /// Loop closure; `None` = odometry and sequential registration only.
     pub closure: Option<ClosureParams>,
 }
@@ -166,6 +171,7 @@ impl Default for PlanarMapParams {
             },
             information_scale: 0.1,
             sigma_floor: 0.01,
+            registration_floor: (0.0, 0.0),
             closure: Some(ClosureParams::default()),
         }
     }
@@ -423,7 +429,7 @@ impl PlanarMapper {
                 .add_edge_se2(prev_id, id, EdgeKind::Odometry, o, info, Kernel::None)?;
         }
         if let (Some(r), None) = (&reg, &doubt) {
-            let info = r.information(self.params.sigma_floor, self.params.information_scale);
+            let info = self.registration_information(r);
             self.graph.add_edge_se2(
                 prev_id,
                 id,
@@ -475,6 +481,25 @@ impl PlanarMapper {
             taken += 1;
         }
         thin(&pts, self.params.voxel)
+    }
+
+    /// The information of a registration edge: the ICP's, with
+    /// [`PlanarMapParams::registration_floor`] added to its covariance.
+    fn registration_information(&self, r: &PlanarIcpResult) -> Matrix3<f64> {
+        let info = symmetric(r.information(self.params.sigma_floor, self.params.information_scale));
+        let (fxy, fth) = self.params.registration_floor;
+        if fxy <= 0.0 && fth <= 0.0 {
+            return info;
+        }
+        let floor = Matrix3::from_diagonal(&nalgebra::Vector3::new(
+            fxy * fxy,
+            fxy * fxy,
+            fth.to_radians().powi(2),
+        ));
+        match info.try_inverse() {
+            Some(cov) => (cov + floor).try_inverse().map_or(info, symmetric),
+            None => info,
+        }
     }
 
     /// Correlative search of `source` on `target` around `guess`, then point-to-line ICP
@@ -624,7 +649,7 @@ impl PlanarMapper {
             cp.gate.doubt(&r)
         };
         if attempt.reason.is_none() {
-            let info = r.information(self.params.sigma_floor, self.params.information_scale);
+            let info = self.registration_information(&r);
             let node_i = self.scans[i].node.expect("placed");
             attempt.edge = Some(self.graph.add_edge_se2(
                 node_j,
