@@ -49,7 +49,8 @@ enum Command {
     /// Localise a scan in a prior map (.olm, .bt) with no initial guess.
     Localize(commands::align::AlignArgs),
     /// Build a map from many scans (batch best-overlap-first or sequential), with optional
-    /// odometry; writes the map, the scan poses and a report.
+    /// odometry; writes the map, the scan poses and a report. A CARMEN 2D laser log
+    /// (.log, .log.gz) is mapped in x-y-yaw with loop closure.
     Map(commands::map::MapArgs),
     /// Compare estimated poses with reference poses (per scan and summaries).
     Eval(commands::eval::EvalArgs),

@@ -28,7 +28,8 @@ pub enum ModeArg {
 #[derive(Args)]
 pub struct MapArgs {
     /// Scans (any point-cloud format) or folders of scans (every cloud file in them, by
-    /// name; a 3DTK folder holds scanNNN.3d files).
+    /// name; a 3DTK folder holds scanNNN.3d files); or one CARMEN 2D laser log (`.log`,
+    /// `.log.gz`, `.log.bz2`), mapped in x-y-yaw with loop closure (see --odometry-noise).
     pub scans: Vec<PathBuf>,
     /// A text file listing scan paths, one per line (relative to the file's folder).
     #[arg(long, value_name = "FILE")]

@@ -9,7 +9,8 @@ use olmap::geometry::{NamedPoseJson, PoseList};
 /// Arguments of `olmap poses`.
 ///
 /// Understands 3DTK `.pose` (odometry, left-handed cm and degrees) and `.frames`
-/// (registration history; the last frame is the final pose), CSV pose tables
+/// (registration history; the last frame is the final pose), CARMEN 2D laser logs (the
+/// `FLASER` poses, named scan000000, …), CSV pose tables
 /// (`carCloudList.csv`: name + row-major 4x4), and olmap pose lists (name + row-major 3x4 of
 /// `T_map_scan` per line; KITTI `poses.txt` too). Everything is shown in right-handed metres
 /// and ZYX degrees.
