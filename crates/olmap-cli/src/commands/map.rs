@@ -327,7 +327,8 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
     }
     println!(
         "  final solve: cost {:.4} -> {:.4}",
-        report.initial_cost, report.final_cost
+        report.initial_cost + 0.0,
+        report.final_cost + 0.0
     );
     println!(
         "  against the log's corrected poses (odometry noise {} / {} deg, seed {}):",

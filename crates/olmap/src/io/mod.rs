@@ -470,7 +470,7 @@ pub(crate) fn decompression_limit(e: ParseError, compressed: u64) -> ParseError 
     match limit {
         Some(limit) => ParseError::TooLarge {
             what: format!(
-                "the compressed data ({compressed} bytes on disk) decompresses to more than {limit} \
+                "the compressed data ({compressed} bytes compressed) decompresses to more than {limit} \
                  bytes"
             ),
             limit: format!(

@@ -193,6 +193,11 @@ pub fn run_planar_log(
             )));
         }
     }
+    if job.max_scans == Some(0) {
+        return Err(Error::InvalidArgument(
+            "the number of scans to map must be at least 1, got 0".into(),
+        ));
+    }
     if !(0.0..=1.0).contains(&job.inject_wrong_closures) {
         return Err(Error::InvalidArgument(format!(
             "the fraction of wrong closures to inject must be between 0 and 1, got {}",
