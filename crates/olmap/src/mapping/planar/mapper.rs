@@ -435,7 +435,7 @@ impl PlanarMapper {
                 id,
                 EdgeKind::Registration,
                 r.pose,
-                symmetric(info),
+                info,
                 Kernel::None,
             )?;
         }
@@ -656,7 +656,7 @@ impl PlanarMapper {
                 node_i,
                 EdgeKind::LoopClosure,
                 r.pose,
-                symmetric(info),
+                info,
                 cp.kernel,
             )?);
             attempt.accepted = true;
