@@ -101,6 +101,22 @@ impl PlanarIcpResult {
         e.min() / self.inliers as f64
     }
 
+    /// The weakest translation direction (unit vector in the target frame): the
+    /// eigenvector of the Hessian's translation block with the smallest eigenvalue (along
+    /// a corridor, the corridor's direction).
+    pub fn weakest_direction(&self) -> Vector2<f64> {
+        let t: Matrix2<f64> = self.hessian.fixed_view::<2, 2>(0, 0).into_owned();
+        let e = t.symmetric_eigen();
+        let k = e.eigenvalues.imin();
+        let v: Vector2<f64> = e.eigenvectors.column(k).into_owned();
+        let n = v.norm();
+        if n > 0.0 && n.is_finite() {
+            v / n
+        } else {
+            Vector2::x()
+        }
+    }
+
     /// The information over `(x, y, theta)` of the registration as a pose-graph edge:
     /// `H / σ²` with σ the RMS residual (at least `sigma_floor`), times `scale` (< 1 because
     /// neighbouring beams' errors are correlated, so the points are not independent).
@@ -355,6 +371,12 @@ mod tests {
             r.weakest_translation() < 1e-3,
             "{}",
             r.weakest_translation()
+        );
+        // The weak direction is the corridor's (x), either sign.
+        assert!(
+            r.weakest_direction().x.abs() > 0.999,
+            "{}",
+            r.weakest_direction()
         );
     }
 }

@@ -82,9 +82,11 @@ pub struct ClosureParams {
     pub gate: RegistrationGate,
     /// The robust kernel of closure edges.
     pub kernel: Kernel,
-    /// How fast the estimate may drift away from the truth while no loop is closed, metres
-    /// per metre travelled: the candidate radius and the search window grow by this times
-    /// the travel since the last accepted closure …
+    /// How fast the estimate may drift away from the truth, metres per metre travelled: the
+    /// candidate radius and the search window grow by this times the *graph distance*
+    /// between the candidate and the new scan: the shortest way between them through the
+    /// graph, counting the path travelled along sequential edges and nothing across
+    /// accepted closures (how much unchecked travel their relative pose rests on) …
     pub drift_per_metre: f64,
     /// … up to this, metres (for the window; the radius grows up to 2x this) …
     pub max_window_xy: f64,
@@ -93,6 +95,13 @@ pub struct ClosureParams {
     pub yaw_drift_deg_per_metre: f64,
     /// See `yaw_drift_deg_per_metre`.
     pub max_window_yaw_deg: f64,
+    /// A closure that passes every gate but that its kernel would down-weight at the
+    /// current estimate (a correction much larger than the graph expects: the drift of a
+    /// long loop, or a wrong match) is held until a second closure found within this much
+    /// further travel (metres) implies the same correction; the two are then solved at full
+    /// weight once (a robust kernel alone would refuse a true correction of metres), and
+    /// keep their kernel afterwards.
+    pub corroboration_travel: f64,
 }
 
 impl Default for ClosureParams {
@@ -116,6 +125,7 @@ impl Default for ClosureParams {
             max_window_xy: 6.0,
             yaw_drift_deg_per_metre: 0.2,
             max_window_yaw_deg: 30.0,
+            corroboration_travel: 10.0,
         }
     }
 }
@@ -147,6 +157,13 @@ pub struct PlanarMapParams {
     pub registration_floor: (f64, f64),
     /// Loop closure; `None` = odometry and sequential registration only.
     pub closure: Option<ClosureParams>,
+    /// A sequential registration refused only because one translation direction is poorly
+    /// held (a corridor: [`RegistrationGate::min_weakest_translation`]) still holds the
+    /// heading and the direction across: with this on, it becomes an edge with no
+    /// information along the weak direction, and odometry supplies the step along it
+    /// ([`PlacementSource::PartialRegistration`]). Off: such scans are placed by odometry
+    /// alone.
+    pub partial_registration: bool,
 }
 
 impl Default for PlanarMapParams {
@@ -173,6 +190,7 @@ impl Default for PlanarMapParams {
             sigma_floor: 0.01,
             registration_floor: (0.0, 0.0),
             closure: Some(ClosureParams::default()),
+            partial_registration: true,
         }
     }
 }
@@ -187,6 +205,9 @@ pub enum PlacementSource {
     Registration,
     /// Odometry alone (the registration was refused; the reason is in `doubt`).
     Odometry,
+    /// Registration across a corridor and in heading, odometry along it (see
+    /// [`PlanarMapParams::partial_registration`]; the gate's doubt is in `doubt`).
+    PartialRegistration,
 }
 
 /// What [`PlanarMapper::add_scan`] did with one scan.
@@ -229,9 +250,23 @@ pub struct ClosureAttempt {
     pub correction_m: f64,
     /// Why it was refused, if it was.
     pub reason: Option<String>,
+    /// When this closure was a large correction confirmed by an earlier held one (see
+    /// [`ClosureParams::corroboration_travel`]): that closure's earlier scan; both edges
+    /// were added.
+    pub corroborates: Option<usize>,
     /// The edge's index in the graph when accepted.
     #[serde(skip)]
     pub edge: Option<usize>,
+}
+
+/// A loop closure that passed every gate.
+struct Closure {
+    from: usize,
+    to: usize,
+    t_from_to: Se2,
+    information: Matrix3<f64>,
+    /// The path travelled when it was found, metres.
+    travel: f64,
 }
 
 struct StoredScan {
@@ -275,7 +310,10 @@ pub struct PlanarMapper {
     last_placed: Option<usize>,
     node_to_scan: FxMap<u64, usize>,
     closure_attempts_at: f64,
-    last_closure_travel: f64,
+    /// Per scan: its graph neighbours and the travel between them (0 across a closure).
+    links: Vec<Vec<(usize, f64)>>,
+    /// Closures that passed every gate but are large corrections, waiting for a second.
+    held: Vec<Closure>,
     optimisations: usize,
 }
 
@@ -289,7 +327,8 @@ impl PlanarMapper {
             last_placed: None,
             node_to_scan: FxMap::default(),
             closure_attempts_at: f64::NEG_INFINITY,
-            last_closure_travel: 0.0,
+            links: Vec::new(),
+            held: Vec::new(),
             optimisations: 0,
         }
     }
@@ -369,6 +408,7 @@ impl PlanarMapper {
             self.graph.add_node_se2(id, pose)?;
             self.graph.set_fixed(id, true)?;
             self.node_to_scan.insert(id, index);
+            self.links.push(Vec::new());
             self.scans.push(StoredScan {
                 name,
                 points,
@@ -397,10 +437,24 @@ impl PlanarMapper {
             Some(r) => self.params.gate.doubt(r),
         };
         placement.inlier_fraction = reg.as_ref().map_or(0.0, |r| r.inlier_fraction());
+        let partial = match (&reg, &doubt, odo_step) {
+            (Some(r), Some(_), Some(o)) if self.params.partial_registration => {
+                let relaxed = RegistrationGate {
+                    min_weakest_translation: 0.0,
+                    ..self.params.gate
+                };
+                relaxed.doubt(r).is_none().then(|| partial_step(r, &o))
+            }
+            _ => None,
+        };
         let step = match (&reg, &doubt, odo_step) {
             (Some(r), None, _) => {
                 placement.source = PlacementSource::Registration;
                 r.pose
+            }
+            _ if partial.is_some() => {
+                placement.source = PlacementSource::PartialRegistration;
+                partial.expect("checked").0
             }
             (_, _, Some(o)) => {
                 placement.source = PlacementSource::Odometry;
@@ -408,6 +462,7 @@ impl PlanarMapper {
             }
             _ => {
                 placement.doubt = doubt;
+                self.links.push(Vec::new());
                 self.scans.push(StoredScan {
                     name,
                     points,
@@ -438,8 +493,20 @@ impl PlanarMapper {
                 info,
                 Kernel::None,
             )?;
+        } else if let (Some(r), Some((measured, weak))) = (&reg, partial) {
+            let info = without_direction(&self.registration_information(r), &weak);
+            self.graph.add_edge_se2(
+                prev_id,
+                id,
+                EdgeKind::Registration,
+                measured,
+                info,
+                Kernel::None,
+            )?;
         }
         let travel = self.scans[prev].travel + step.x.hypot(step.y);
+        self.links.push(vec![(prev, step.x.hypot(step.y))]);
+        self.links[prev].push((index, step.x.hypot(step.y)));
         self.scans.push(StoredScan {
             name,
             points,
@@ -455,7 +522,6 @@ impl PlanarMapper {
                 self.closure_attempts_at = travel;
                 placement.closures = self.try_closures(index, &cp)?;
                 if placement.closures.iter().any(|c| c.accepted) {
-                    self.last_closure_travel = travel;
                     self.optimise()?;
                 }
             }
@@ -539,12 +605,12 @@ impl PlanarMapper {
         Some((lines.register(source, m.pose, &self.params.icp), m))
     }
 
-    /// The closure search window for a scan at `travel`: the base window grown with the
-    /// travel since the last accepted closure (the drift the estimate may have gathered),
-    /// with coarser steps when it grows large so the search stays cheap (the refinement
-    /// takes the answer to full precision).
-    fn closure_window(&self, travel: f64, cp: &ClosureParams) -> CorrelativeParams {
-        let since = (travel - self.last_closure_travel).max(0.0);
+    /// The closure search window for a candidate `path` metres back along the path: the
+    /// base window grown with the drift that path may have gathered, with coarser steps
+    /// when it grows large so the search stays cheap (the refinement takes the answer to
+    /// full precision).
+    fn closure_window(&self, path: f64, cp: &ClosureParams) -> CorrelativeParams {
+        let since = path.max(0.0);
         let mut w = cp.search;
         w.window_xy =
             (w.window_xy + cp.drift_per_metre * since).min(cp.max_window_xy.max(w.window_xy));
@@ -557,13 +623,39 @@ impl PlanarMapper {
         w
     }
 
+    /// The graph distance (see [`ClosureParams::drift_per_metre`]) from scan `i` to every
+    /// scan, metres; beyond the distance at which the closure window stops growing the
+    /// search stops and reports that distance.
+    fn graph_distances(&self, i: usize, cp: &ClosureParams) -> Vec<f64> {
+        let grow_xy = (cp.max_window_xy - cp.search.window_xy).max(0.0);
+        let grow_yaw = (cp.max_window_yaw_deg - cp.search.window_yaw_deg).max(0.0);
+        let cap = (grow_xy / cp.drift_per_metre.max(1e-9))
+            .max(grow_yaw / cp.yaw_drift_deg_per_metre.max(1e-9));
+        let mut dist = vec![cap; self.links.len()];
+        let mut heap = std::collections::BinaryHeap::new();
+        dist[i] = 0.0;
+        heap.push((std::cmp::Reverse(OrdF64(0.0)), i));
+        while let Some((std::cmp::Reverse(OrdF64(d)), k)) = heap.pop() {
+            if d > dist[k] {
+                continue;
+            }
+            for &(m, w) in &self.links[k] {
+                let nd = d + w;
+                if nd < dist[m] {
+                    dist[m] = nd;
+                    heap.push((std::cmp::Reverse(OrdF64(nd)), m));
+                }
+            }
+        }
+        dist
+    }
+
     /// Tries loop closures from scan `i` onto earlier stretches of the path.
     fn try_closures(&mut self, i: usize, cp: &ClosureParams) -> Result<Vec<ClosureAttempt>> {
         let node_i = self.scans[i].node.expect("placed");
         let pose_i = self.graph.pose_se2(node_i).expect("node");
         let travel_i = self.scans[i].travel;
-        let search = self.closure_window(travel_i, cp);
-        let radius = cp.radius + (search.window_xy - cp.search.window_xy);
+        let apart = self.graph_distances(i, cp);
         let mut candidates: Vec<(f64, usize)> = self
             .scans
             .iter()
@@ -572,6 +664,8 @@ impl PlanarMapper {
             .filter_map(|(j, s)| {
                 let p = self.graph.pose_se2(s.node?)?;
                 let d = (p.x - pose_i.x).hypot(p.y - pose_i.y);
+                let window = self.closure_window(apart[j], cp).window_xy;
+                let radius = cp.radius + (window - cp.search.window_xy);
                 (d <= radius).then_some((d, j))
             })
             .collect();
@@ -587,6 +681,7 @@ impl PlanarMapper {
         }
         let mut attempts = Vec::new();
         for j in chosen {
+            let search = self.closure_window(apart[j], cp);
             attempts.push(self.try_closure(j, i, &pose_i, cp, &search)?);
         }
         Ok(attempts)
@@ -628,6 +723,7 @@ impl PlanarMapper {
             inlier_fraction: 0.0,
             correction_m: 0.0,
             reason: None,
+            corroborates: None,
             edge: None,
         };
         let Some((r, m)) = self.register(&pts, &self.scans[i].points, guess, window) else {
@@ -649,19 +745,118 @@ impl PlanarMapper {
             cp.gate.doubt(&r)
         };
         if attempt.reason.is_none() {
-            let info = self.registration_information(&r);
-            let node_i = self.scans[i].node.expect("placed");
-            attempt.edge = Some(self.graph.add_edge_se2(
-                node_j,
-                node_i,
-                EdgeKind::LoopClosure,
-                r.pose,
-                info,
-                cp.kernel,
-            )?);
-            attempt.accepted = true;
+            let closure = Closure {
+                from: j,
+                to: i,
+                t_from_to: r.pose,
+                information: self.registration_information(&r),
+                travel: travel_i,
+            };
+            self.apply_or_hold(closure, &mut attempt, cp)?;
         }
         Ok(attempt)
+    }
+
+    /// A closure that passed every gate: one its kernel keeps at the current estimate is
+    /// added at once; one it would down-weight (a large correction: the drift of a long
+    /// loop, or a wrong match) waits until a second closure agrees with it, and the two are
+    /// then solved at full weight before their kernel returns.
+    fn apply_or_hold(
+        &mut self,
+        closure: Closure,
+        attempt: &mut ClosureAttempt,
+        cp: &ClosureParams,
+    ) -> Result<()> {
+        let chi2 = self.chi2(&closure);
+        let kept = match cp.kernel {
+            Kernel::Dcs(phi) => chi2 <= 3.0 * phi,
+            Kernel::Cauchy(w) | Kernel::Huber(w) => chi2 <= 9.0 * w,
+            Kernel::None => true,
+        };
+        if kept {
+            attempt.edge = Some(self.add_closure(&closure, cp.kernel)?);
+            attempt.accepted = true;
+            return Ok(());
+        }
+        self.held
+            .retain(|h| closure.travel - h.travel <= cp.corroboration_travel);
+        let agreeing = self
+            .held
+            .iter()
+            .position(|h| h.from != closure.from && self.agree(h, &closure));
+        let Some(k) = agreeing else {
+            attempt.reason = Some(format!(
+                "large correction (chi2 {chi2:.0} at the current estimate): held until a second closure agrees"
+            ));
+            self.held.push(closure);
+            return Ok(());
+        };
+        let first = self.held.remove(k);
+        let e1 = self.add_closure(&first, Kernel::None)?;
+        let e2 = self.add_closure(&closure, Kernel::None)?;
+        self.optimise()?;
+        self.graph.set_kernel(e1, cp.kernel)?;
+        self.graph.set_kernel(e2, cp.kernel)?;
+        attempt.edge = Some(e2);
+        attempt.accepted = true;
+        attempt.corroborates = Some(first.from);
+        Ok(())
+    }
+
+    /// Adds a closure's edge and its graph-distance link.
+    fn add_closure(&mut self, c: &Closure, kernel: Kernel) -> Result<usize> {
+        let (a, b) = (
+            self.scans[c.from].node.expect("placed"),
+            self.scans[c.to].node.expect("placed"),
+        );
+        let e = self.graph.add_edge_se2(
+            a,
+            b,
+            EdgeKind::LoopClosure,
+            c.t_from_to,
+            c.information,
+            kernel,
+        )?;
+        self.links[c.from].push((c.to, 0.0));
+        self.links[c.to].push((c.from, 0.0));
+        Ok(e)
+    }
+
+    /// The closure's squared error at the current estimate.
+    fn chi2(&self, c: &Closure) -> f64 {
+        let (Some(a), Some(b)) = (self.pose_of(c.from), self.pose_of(c.to)) else {
+            return f64::INFINITY;
+        };
+        let rel = a.inverse().compose(&b);
+        let r = nalgebra::Vector3::new(
+            rel.x - c.t_from_to.x,
+            rel.y - c.t_from_to.y,
+            crate::geometry::wrap_angle(rel.theta - c.t_from_to.theta),
+        );
+        (r.transpose() * c.information * r)[0]
+    }
+
+    /// Whether two held closures tell the same story: the pose of `b.to` they imply (via
+    /// `a`, then the current estimate from `a.to` to `b.to`; and via `b`) agree within
+    /// 0.3 m and 3° plus the drift of the path between the two new scans.
+    fn agree(&self, a: &Closure, b: &Closure) -> bool {
+        let poses = (
+            self.pose_of(a.from),
+            self.pose_of(a.to),
+            self.pose_of(b.from),
+            self.pose_of(b.to),
+        );
+        let (Some(af), Some(at), Some(bf), Some(bt)) = poses else {
+            return false;
+        };
+        let via_a = af.compose(&a.t_from_to).compose(&at.inverse().compose(&bt));
+        let via_b = bf.compose(&b.t_from_to);
+        let path = (b.travel - a.travel).abs();
+        let dxy = (via_a.x - via_b.x).hypot(via_a.y - via_b.y);
+        let dth = crate::geometry::wrap_angle(via_a.theta - via_b.theta)
+            .abs()
+            .to_degrees();
+        dxy <= 0.3 + 0.05 * path && dth <= 3.0 + 0.5 * path
     }
 
     /// Adds a loop-closure edge `T_from_to` by hand, with the information and kernel the
@@ -726,6 +921,42 @@ fn solve_params() -> SolveParams {
     }
 }
 
+/// An `f64` ordered by `total_cmp`, for the graph-distance heap.
+#[derive(Clone, Copy, PartialEq)]
+struct OrdF64(f64);
+
+impl Eq for OrdF64 {}
+
+impl PartialOrd for OrdF64 {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for OrdF64 {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+/// The step of a registration that holds all but its weakest translation direction `u`:
+/// the registration's heading and translation across `u`, the odometry's along `u`; and `u`.
+fn partial_step(r: &PlanarIcpResult, odometry: &Se2) -> (Se2, Vector2<f64>) {
+    let u = r.weakest_direction();
+    let t = Vector2::new(r.pose.x, r.pose.y);
+    let along = (Vector2::new(odometry.x, odometry.y) - t).dot(&u);
+    let t = t + u * along;
+    (Se2::new(t.x, t.y, r.pose.theta), u)
+}
+
+/// `info` with nothing left along the translation direction `u` (the projection
+/// `P·info·P`, `P = I − [u 0][u 0]ᵀ`).
+fn without_direction(info: &Matrix3<f64>, u: &Vector2<f64>) -> Matrix3<f64> {
+    let w = nalgebra::Vector3::new(u.x, u.y, 0.0);
+    let p = Matrix3::identity() - w * w.transpose();
+    symmetric(p * info * p)
+}
+
 fn symmetric(m: Matrix3<f64>) -> Matrix3<f64> {
     (m + m.transpose()) * 0.5
 }
@@ -746,4 +977,48 @@ pub fn thin(points: &[Vector2<f64>], voxel: f64) -> Vec<Vector2<f64>> {
         .filter(|p| seen.insert(((p.x / voxel).floor() as i64, (p.y / voxel).floor() as i64)))
         .copied()
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_corridor_edge_keeps_no_information_along_the_corridor() {
+        // A registration in a corridor along (1, 1)/√2: strong across, weak along,
+        // correlated with heading across.
+        let along = Vector2::new(1.0, 1.0) / 2f64.sqrt();
+        let across = Vector2::new(-along.y, along.x);
+        let a = nalgebra::Vector3::new(across.x, across.y, 0.0);
+        let l = nalgebra::Vector3::new(along.x, along.y, 0.0);
+        let h = a * a.transpose() * 400.0
+            + l * l.transpose() * 3.0
+            + Matrix3::new(0.0, 0.0, 5.0, 0.0, 0.0, 5.0, 5.0, 5.0, 90.0);
+        let p = without_direction(&h, &along);
+        // Nothing along the corridor, in translation or coupled with heading …
+        assert!((p * l).norm() < 1e-9, "{p}");
+        // … and everything across and in heading kept.
+        assert!(((a.transpose() * p * a)[0] - (a.transpose() * h * a)[0]).abs() < 1e-9);
+        assert!((p[(2, 2)] - h[(2, 2)]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn graph_distances_count_travel_and_nothing_across_closures() {
+        let mut m = PlanarMapper::new(PlanarMapParams::default());
+        // A chain 0-1-2-3-4 with 2 m steps, and a closure 4-0.
+        m.links = vec![
+            vec![(1, 2.0)],
+            vec![(0, 2.0), (2, 2.0)],
+            vec![(1, 2.0), (3, 2.0)],
+            vec![(2, 2.0), (4, 2.0)],
+            vec![(3, 2.0)],
+        ];
+        let cp = ClosureParams::default();
+        let d = m.graph_distances(4, &cp);
+        assert_eq!(d, vec![8.0, 6.0, 4.0, 2.0, 0.0]);
+        m.links[4].push((0, 0.0));
+        m.links[0].push((4, 0.0));
+        let d = m.graph_distances(4, &cp);
+        assert_eq!(d, vec![0.0, 2.0, 4.0, 2.0, 0.0]);
+    }
 }

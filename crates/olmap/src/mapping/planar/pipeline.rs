@@ -243,6 +243,7 @@ pub fn run_planar_log(
                 PlacementSource::First => "first",
                 PlacementSource::Registration => "registration",
                 PlacementSource::Odometry => "odometry",
+                PlacementSource::PartialRegistration => "partial_registration",
             };
             *sources.entry(key.into()).or_default() += 1;
         }
@@ -252,7 +253,7 @@ pub fn run_planar_log(
         for c in &p.closures {
             tried += 1;
             if c.accepted {
-                accepted += 1;
+                accepted += 1 + usize::from(c.corroborates.is_some());
             } else if let Some(r) = &c.reason {
                 *refused.entry(reason_head(r)).or_default() += 1;
             }
