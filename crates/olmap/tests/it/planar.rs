@@ -287,6 +287,79 @@ fn simulated_corridor_ring_closes_its_loop() {
     }
 }
 
+/// The ACES log (440 scans about 1 m apart, long bare corridors, one large loop): the big
+/// loop's correction is metres, far beyond what the robust kernel keeps at the estimate
+/// before it, so it must be held, confirmed by a second closure and applied. Every
+/// accepted closure must be right against the corrected poses (good to a few cm, data
+/// README §4.3; 0.3 m / 2° allows for scan matching on 1° beams), at least one must span
+/// the big loop (≥ 100 m of travel), and the map must keep less than a tenth of the
+/// odometry's error.
+#[test]
+fn aces_big_loop_closes_through_a_confirmed_held_closure() {
+    let Some(path) = log_path("aces-corrected.log.gz") else {
+        return;
+    };
+    let log = read_carmen(&path).unwrap();
+    let reference: Vec<Se2> = log
+        .scans
+        .iter()
+        .map(|s| Se2::new(s.pose[0], s.pose[1], s.pose[2]))
+        .collect();
+    let mut travel = vec![0.0; reference.len()];
+    for i in 1..reference.len() {
+        let d = reference[i - 1].inverse().compose(&reference[i]);
+        travel[i] = travel[i - 1] + d.x.hypot(d.y);
+    }
+    let odometry = NOISE.degrade(&reference, 1);
+    let params = PlanarMapParams {
+        odometry_noise: NOISE,
+        ..PlanarMapParams::default()
+    };
+    let mut mapper = PlanarMapper::new(params);
+    let no_return = log.max_range.min(30.0) - 1e-6;
+    let mut confirmed = 0;
+    for (i, scan) in log.scans.iter().enumerate() {
+        let p = mapper
+            .add_scan(
+                CarmenLog::scan_name(i),
+                scan.points(no_return, 0.05),
+                Some(odometry[i]),
+            )
+            .unwrap();
+        confirmed += p
+            .closures
+            .iter()
+            .filter(|c| c.corroborates.is_some())
+            .count();
+    }
+    mapper.optimise().unwrap();
+    let (n, t, r) = worst_closure(&mapper, &reference);
+    let longest = mapper
+        .graph()
+        .edges()
+        .iter()
+        .filter(|e| e.kind == EdgeKind::LoopClosure)
+        .map(|e| (travel[e.to as usize] - travel[e.from as usize]).abs())
+        .fold(0.0, f64::max);
+    let poses: Vec<Option<Se2>> = (0..reference.len()).map(|i| mapper.pose_of(i)).collect();
+    let with = planar_errors(&poses, &reference);
+    let odo: Vec<Option<Se2>> = odometry.iter().copied().map(Some).collect();
+    let alone = planar_errors(&odo, &reference);
+    eprintln!(
+        "aces seed 1: {n} closures ({confirmed} confirmed held ones), longest {longest:.0} m, worst {t:.3} m / {r:.2} deg; {with:?}; odometry {alone:?}"
+    );
+    assert!(confirmed > 0, "no held closure was confirmed");
+    assert!(t < 0.3 && r < 2.0, "a wrong closure ({t} m, {r} deg)");
+    assert!(
+        longest >= 100.0,
+        "the big loop was not closed ({longest} m)"
+    );
+    assert!(
+        with.ate_rmse_m <= 0.1 * alone.ate_rmse_m,
+        "{with:?} vs odometry {alone:?}"
+    );
+}
+
 /// A straight 60 m corridor with identical doors every 4 m, driven to the end and back:
 /// every place on the way back looks like its neighbours 4 m away. Closures there must be
 /// refused or right; none may be 4 m off.
