@@ -447,16 +447,16 @@ impl PlanarMapper {
             }
             _ => None,
         };
-        let step = match (&reg, &doubt, odo_step) {
-            (Some(r), None, _) => {
+        let step = match (&reg, &doubt, odo_step, partial) {
+            (Some(r), None, _, _) => {
                 placement.source = PlacementSource::Registration;
                 r.pose
             }
-            _ if partial.is_some() => {
+            (_, _, _, Some((p, _))) => {
                 placement.source = PlacementSource::PartialRegistration;
-                partial.expect("checked").0
+                p
             }
-            (_, _, Some(o)) => {
+            (_, _, Some(o), None) => {
                 placement.source = PlacementSource::Odometry;
                 o
             }
@@ -768,12 +768,8 @@ impl PlanarMapper {
         cp: &ClosureParams,
     ) -> Result<()> {
         let chi2 = self.chi2(&closure);
-        let kept = match cp.kernel {
-            Kernel::Dcs(phi) => chi2 <= 3.0 * phi,
-            Kernel::Cauchy(w) | Kernel::Huber(w) => chi2 <= 9.0 * w,
-            Kernel::None => true,
-        };
-        if kept {
+        // The kernel's own weight at this error, at least a quarter (DCS: χ² ≤ 3Φ).
+        if cp.kernel.rho(chi2).1 >= 0.25 {
             attempt.edge = Some(self.add_closure(&closure, cp.kernel)?);
             attempt.accepted = true;
             return Ok(());
