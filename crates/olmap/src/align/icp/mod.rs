@@ -82,7 +82,7 @@ mod target;
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
 
 pub use self::degeneracy::Degeneracy;
 pub use self::params::{IcpParams, RobustKernel};
@@ -115,6 +115,14 @@ pub struct IcpResult {
     pub correspondences: usize,
     /// How well the final alignment constrains each degree of freedom.
     pub degeneracy: Degeneracy,
+    /// Unweighted `Σ J₀ J₀ᵀ` over the inliers at the final pose, with
+    /// `J₀ = (q × n, n)` for an inlier mapped to `q` in the target frame with target normal
+    /// `n`: the Gauss-Newton matrix of the point-to-plane residuals for a small motion
+    /// `(ω, v)` applied on the left about the target frame's origin (rotation first). See
+    /// [`IcpResult::edge_information`] for it as a pose-graph edge's information.
+    pub hessian: Matrix6<f64>,
+    /// Inliers at the final pose (`inlier_fraction` times the source points used).
+    pub inliers: usize,
     /// Wall-clock time of the call, seconds (preprocessing included).
     pub seconds: f64,
 }
@@ -270,6 +278,8 @@ pub fn refine(
         inlier_fraction,
         correspondences,
         degeneracy,
+        hessian,
+        inliers,
     } = statistics(&src, tgt.as_ref(), &pose, params);
     if correspondences < 6 {
         converged = false;
@@ -283,8 +293,44 @@ pub fn refine(
         inlier_fraction,
         correspondences,
         degeneracy,
+        hessian,
+        inliers,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+impl IcpResult {
+    /// The registration as a pose-graph edge `target → source` (measurement `self.pose`):
+    /// its information over the graph's residual (translation first, then rotation; see
+    /// [`crate::graph`]), `B H Bᵀ · scale / σ²` with `H` = [`IcpResult::hessian`], σ the
+    /// inlier RMS residual (at least `sigma_floor`) and `B` the change from a left motion
+    /// about the target origin to the graph's right perturbation of the source's pose
+    /// ([`edge_information_from`]). `scale` (< 1) accounts for neighbouring points' errors
+    /// being correlated (the points are not independent measurements).
+    pub fn edge_information(&self, sigma_floor: f64, scale: f64) -> Matrix6<f64> {
+        let s = self.inlier_rms.max(sigma_floor);
+        edge_information_from(&self.hessian, &self.pose) * (scale / (s * s))
+    }
+}
+
+/// `B H Bᵀ`: a point-to-plane Gauss-Newton matrix `H` over `(ω, v)` (a motion applied on
+/// the left of `t_target_source`, about the target origin; [`IcpResult::hessian`])
+/// expressed over the pose graph's residual of an edge `target → source` with measurement
+/// `t_target_source` (`e = (R_iᵀ (p_j − p_i) − t, Log(Rᵀ R_iᵀ R_j))`, translation first).
+/// For a point with normal `n` mapped to `q = R p + t`, the residual changes by `n · e_t`
+/// and `(Rᵀ (q − t) × Rᵀ n) · e_r`, so `B = [[0, I], [Rᵀ, −Rᵀ [t]×]]`.
+pub fn edge_information_from(hessian: &Matrix6<f64>, t_target_source: &Pose) -> Matrix6<f64> {
+    let iso = t_target_source.isometry();
+    let rt = iso.rotation.to_rotation_matrix().matrix().transpose();
+    let t = iso.translation.vector;
+    let mut b = Matrix6::<f64>::zeros();
+    b.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&nalgebra::Matrix3::identity());
+    b.fixed_view_mut::<3, 3>(3, 0).copy_from(&rt);
+    b.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(-rt * t.cross_matrix()));
+    let m = b * hessian * b.transpose();
+    (m + m.transpose()) * 0.5
 }
 
 #[cfg(test)]
@@ -434,6 +480,52 @@ mod tests {
             Pose::from_xyz_ypr(-0.2, 0.3, -0.3, deg(-4.0), deg(3.0), deg(-5.0)),
             Pose::from_xyz_ypr(0.1, 0.05, 0.0, deg(2.0), deg(0.5), deg(-1.0)),
         ]
+    }
+
+    /// The edge information is the Gauss-Newton matrix of the point-to-plane residuals over
+    /// the pose graph's residual: checked against central differences of the residuals of
+    /// points on planes, the source pose moved by the graph's right perturbation.
+    #[test]
+    fn edge_information_matches_numerical_differentiation() {
+        let t = Pose::from_xyz_ypr(1.5, -2.0, 0.3, 0.7, 0.1, -0.2);
+        let mut rng = Rng(7);
+        // Source points (source frame) and the target plane each lies on (normal, offset).
+        let mut pairs = Vec::new();
+        let mut hessian = Matrix6::<f64>::zeros();
+        for _ in 0..40 {
+            let p = Point3::new(4.0 * rng.gauss(), 4.0 * rng.gauss(), 1.0 + rng.gauss());
+            let n = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+            let q = t.transform_point(&p);
+            let a = q.coords.cross(&n);
+            let j = nalgebra::Vector6::new(a.x, a.y, a.z, n.x, n.y, n.z);
+            hessian += j * j.transpose();
+            pairs.push((p, n, n.dot(&q.coords)));
+        }
+        let info = edge_information_from(&hessian, &t);
+        // The source pose whose graph residual against measurement `t` is `e`.
+        let moved = |e: &nalgebra::Vector6<f64>| {
+            let iso = t.isometry();
+            let tr = iso.translation.vector + Vector3::new(e[0], e[1], e[2]);
+            let rot =
+                iso.rotation * UnitQuaternion::from_scaled_axis(Vector3::new(e[3], e[4], e[5]));
+            Pose::from_isometry(Isometry3::from_parts(Translation3::from(tr), rot))
+        };
+        let h = 1e-6;
+        let mut numeric = Matrix6::<f64>::zeros();
+        for (p, n, d) in &pairs {
+            let mut j = nalgebra::Vector6::zeros();
+            for k in 0..6 {
+                let mut e = nalgebra::Vector6::zeros();
+                e[k] = h;
+                let plus = n.dot(&moved(&e).transform_point(p).coords) - d;
+                e[k] = -h;
+                let minus = n.dot(&moved(&e).transform_point(p).coords) - d;
+                j[k] = (plus - minus) / (2.0 * h);
+            }
+            numeric += j * j.transpose();
+        }
+        let err = (info - numeric).abs().max();
+        assert!(err < 1e-5 * numeric.abs().max(), "{info}\n{numeric}");
     }
 
     #[test]

@@ -167,6 +167,10 @@ pub(super) struct Statistics {
     pub(super) correspondences: usize,
     /// How well the pose is constrained.
     pub(super) degeneracy: Degeneracy,
+    /// Unweighted `Σ J₀ J₀ᵀ` over the inliers, `J₀ = (q × n, n)` about the target origin.
+    pub(super) hessian: Matrix6<f64>,
+    /// Inliers.
+    pub(super) inliers: usize,
 }
 
 /// The statistics and degeneracy at `pose` and the final correspondence distance
@@ -178,7 +182,7 @@ pub(super) fn statistics(
     params: &IcpParams,
 ) -> Statistics {
     let pose = *pose;
-    let (inlier_rms, inlier_fraction, correspondences, degeneracy) = match tgt {
+    let (inlier_rms, inlier_fraction, correspondences, degeneracy, hessian, inliers) = match tgt {
         Some(tgt) if !src.points.is_empty() => {
             let d = params.max_distance_end;
             let centre = pose * src.centroid;
@@ -194,14 +198,25 @@ pub(super) fn statistics(
                 fraction,
                 acc.matched,
                 acc.degeneracy(params.weak_fraction),
+                acc.info,
+                acc.inliers,
             )
         }
-        _ => (0.0, 0.0, 0, Degeneracy::unconstrained()),
+        _ => (
+            0.0,
+            0.0,
+            0,
+            Degeneracy::unconstrained(),
+            Matrix6::zeros(),
+            0,
+        ),
     };
     Statistics {
         inlier_rms,
         inlier_fraction,
         correspondences,
         degeneracy,
+        hessian,
+        inliers,
     }
 }
