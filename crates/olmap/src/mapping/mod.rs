@@ -10,6 +10,7 @@ mod input;
 mod links;
 mod pipeline;
 pub mod planar;
+pub mod posegraph;
 mod report;
 
 pub use builder::{

@@ -36,6 +36,10 @@ pub struct MapJob {
     /// Where to write the JSON report; the HTML report goes beside it (with the `render`
     /// feature).
     pub report: Option<PathBuf>,
+    /// Where to write the pose graph as g2o (nodes = placed scans by input index, edges =
+    /// odometry, pairwise registrations and loop closures with their information); needs
+    /// [`MapParams::graph`].
+    pub graph_out: Option<PathBuf>,
 }
 
 /// What [`run_map_job`] built and reported.
@@ -60,6 +64,14 @@ fn declare_outputs(job: &MapJob) -> Result<OutputSet> {
     if let Some(dir) = &job.scans_out {
         set.folder(dir)?;
         set.file(&dir.join("poses.txt"), "pose list")?;
+    }
+    if let Some(p) = &job.graph_out {
+        if job.params.graph.is_none() {
+            return Err(Error::InvalidArgument(
+                "a graph file needs the pose-graph refinement (MapParams::graph; --graph)".into(),
+            ));
+        }
+        set.file(p, "g2o graph")?;
     }
     if let Some(p) = &job.report {
         set.file(p, "JSON report")?;
@@ -106,6 +118,9 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     }
     if let Some(out) = &job.poses_out {
         poses.write_path(set.path(out)?)?;
+    }
+    if let (Some(out), Some(g)) = (&job.graph_out, &build.graph) {
+        crate::graph::write_g2o(&set.path(out)?, &g.graph)?;
     }
     if let Some(dir) = &job.scans_out {
         for s in &build.scan_maps {

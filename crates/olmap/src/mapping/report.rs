@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+use super::posegraph::GraphRefineReport;
 use super::{Evaluation, MapBuild};
 use crate::geometry::PoseJson;
 
@@ -29,6 +30,9 @@ pub struct MapReport {
     pub resolution: f64,
     /// Wall time of the build, seconds.
     pub seconds: f64,
+    /// The pose-graph refinement, when asked for (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<GraphRefineReport>,
 }
 
 /// One placed scan in a [`MapReport`].
@@ -97,6 +101,7 @@ impl MapReport {
             voxels: build.map.len(),
             resolution,
             seconds: build.seconds,
+            graph: build.graph.as_ref().map(|g| g.report.clone()),
         }
     }
 }

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{ScanStore, TeamMap};
 use crate::geometry::Pose;
-use crate::mapping::{mean_median_max, position_histogram, Evaluation, Placement};
+use crate::mapping::{mean_median_max, position_histogram, Evaluation};
 
 /// The `format` field of a team report.
 pub const TEAM_REPORT_FORMAT: &str = "olmap-team-report";
@@ -64,6 +64,9 @@ pub struct TeamReport {
     pub evaluation: EvaluationReport,
     /// The files written beside the report.
     pub files: TeamFiles,
+    /// The pose-graph refinement of the joint map, when asked for (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<crate::mapping::posegraph::GraphRefineReport>,
 }
 
 /// How many links one thesis equation made.
@@ -398,6 +401,7 @@ impl TeamReport {
                 poses: "team_poses.txt".into(),
                 store: "team.store".into(),
             },
+            graph: team.build.graph.as_ref().map(|g| g.report.clone()),
         }
     }
 }
@@ -444,10 +448,7 @@ fn placements(
         .placed
         .iter()
         .map(|p| {
-            let linked_scan = match &p.via {
-                Placement::Sighting { other, .. } => Some(name_of(*other)),
-                _ => None,
-            };
+            let linked_scan = p.via.linked_scan().map(name_of);
             let error = team_eval
                 .and_then(|e| e.scans.iter().find(|s| s.name == p.name))
                 .map(|s| PlacementError {

@@ -414,6 +414,7 @@ fn audit_map_report_dir_checked_before_compute() {
         poses_out: Some(dir.path().join("p.txt")),
         scans_out: None,
         report: Some(dir.path().join("nodir/r.json")),
+        graph_out: None,
     };
     let err = run_map_job(&job, &mut |_, _, _| {}).unwrap_err();
     assert!(

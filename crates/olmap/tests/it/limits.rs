@@ -474,6 +474,7 @@ fn audit_map_duplicate_scan_names_are_refused() {
         poses_out: None,
         scans_out: None,
         report: None,
+        graph_out: None,
     };
     let e = olmap::mapping::run_map_job(&job, &mut |_, _, _| {}).unwrap_err();
     assert_invalid(

@@ -17,6 +17,7 @@ mod mutual;
 mod occupancy;
 mod pipelines;
 mod planar;
+mod posegraph3d;
 mod real_data;
 #[cfg(feature = "render")]
 mod render;

@@ -174,6 +174,7 @@ fn map_job_writes_what_its_report_says() {
         poses_out: Some(dir.path().join("poses.txt")),
         scans_out: None,
         report: Some(dir.path().join("report.json")),
+        graph_out: None,
     };
     let run = run_map_job(&job, &mut |_, _, _| {}).unwrap();
     assert_eq!(run.report.scans, 3);

@@ -13,6 +13,7 @@ use std::time::Instant;
 pub use fuse::fuse_scan_maps;
 
 use super::links::{Placement, TeamLinks};
+use super::posegraph::{refine_placed, GraphRefineParams, GraphRefinement};
 use crate::align::{RegisterParams, Registration};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -80,6 +81,10 @@ pub struct MapParams {
     /// ceilings match anywhere and make the search ambiguous; thesis §5.4, §6.4.2 use a
     /// sub-ceiling band). The fused map keeps every point. Default `None` (all points).
     pub register_band: Option<(f64, f64)>,
+    /// After placing, make the poses consistent with a pose graph of pairwise
+    /// registrations and odometry ([`crate::mapping::posegraph`]); the map is fused at the
+    /// refined poses and [`MapBuild::graph`] holds the graph. Default `None` (off).
+    pub graph: Option<GraphRefineParams>,
 }
 
 impl MapParams {
@@ -126,6 +131,9 @@ impl MapParams {
                 ));
             }
         }
+        if let Some(g) = &self.graph {
+            g.validate()?;
+        }
         Ok(())
     }
 }
@@ -144,6 +152,7 @@ impl Default for MapParams {
             odometry_tolerance: 2.0,
             keep_scan_maps: true,
             register_band: None,
+            graph: None,
         }
     }
 }
@@ -214,6 +223,9 @@ pub struct MapBuild {
     /// with `p0 = 0.5`, one log-odds unit per count and `V = 0`: the volume term is one
     /// constant for a whole run, so the curve's shape and differences are (7.4)'s.
     pub entropy_after_scan: Vec<f64>,
+    /// The pose-graph refinement of the placed poses, when [`MapParams::graph`] asked for
+    /// it (the poses in `placed` are then the refined ones).
+    pub graph: Option<GraphRefinement>,
 }
 
 /// The mappers' running record: the scans placed so far, in joining order, and the doubts
@@ -307,9 +319,19 @@ pub fn build_map_linked(
         MapMode::Batch => batch::place_best_first(&mut state, &mut placing, &mut progress)?,
     }
     let Placing {
-        placed,
+        mut placed,
         last_doubts,
     } = placing;
+    let graph = match &params.graph {
+        Some(g) => {
+            let refined = refine_placed(scans, team, &placed, g)?;
+            for (p, pose) in placed.iter_mut().zip(&refined.poses) {
+                p.pose = *pose;
+            }
+            Some(refined)
+        }
+        None => None,
+    };
     let rejected = (0..scans.len())
         .filter(|&s| state.poses[s].is_none())
         .map(|s| RejectedScan {
@@ -330,6 +352,7 @@ pub fn build_map_linked(
         registrations: state.registrations,
         seconds: start.elapsed().as_secs_f64(),
         entropy_after_scan: fused.entropy_after_scan,
+        graph,
     })
 }
 
