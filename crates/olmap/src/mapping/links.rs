@@ -144,16 +144,34 @@ pub enum Placement {
         /// The linked scan's index.
         other: usize,
     },
+    /// A two-way sighting (6.4) with scan `other` alone: the map around the scan was too
+    /// thin to confirm it (too little overlap, or a repeating place), and did not
+    /// contradict it (the scan's surfaces do not stand in the map's free space). The
+    /// thesis' own mutual localisation (§3.3-3.5: a few centimetres and about a degree).
+    MutualSighting {
+        /// The linked scan's index.
+        other: usize,
+    },
 }
 
 impl Placement {
-    /// A short label for reports: `frame`, `odometry`, `global`, `sighting (6.x)`.
+    /// A short label for reports: `frame`, `odometry`, `global`, `sighting (6.x)`,
+    /// `mutual sighting alone (6.4)`.
     pub fn label(&self) -> String {
         match self {
             Placement::Frame => "frame".into(),
             Placement::Odometry => "odometry".into(),
             Placement::Global => "global".into(),
             Placement::Sighting { equation, .. } => format!("sighting {equation}"),
+            Placement::MutualSighting { .. } => "mutual sighting alone (6.4)".into(),
+        }
+    }
+
+    /// The linked scan of a placement by sighting.
+    pub fn linked_scan(&self) -> Option<usize> {
+        match self {
+            Placement::Sighting { other, .. } | Placement::MutualSighting { other } => Some(*other),
+            _ => None,
         }
     }
 }

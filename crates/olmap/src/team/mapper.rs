@@ -209,11 +209,28 @@ pub fn map_team(
             continue;
         }
         let own: Vec<usize> = (0..scans.len()).filter(|&i| team.frame[i] == k).collect();
+        let placed_scan = |i: usize| build.placed.iter().any(|p| p.index == i);
+        // Sighted by (or seeing) a placed scan, but no link search was trusted: the
+        // searches' own doubts say why; otherwise no sighting ever tied it.
+        let sighted = own
+            .iter()
+            .any(|&i| team.links[i].iter().any(|l| placed_scan(l.other())));
         for r in build.rejected.iter_mut().filter(|r| own.contains(&r.index)) {
-            r.reasons = vec![format!(
-                "no sighting ties {} to the team: mapped alone in its own frame",
-                f.name
-            )];
+            if sighted {
+                r.reasons.insert(
+                    0,
+                    format!(
+                        "no search along {}'s sightings was trusted: mapped alone in its own \
+                         frame",
+                        f.name
+                    ),
+                );
+            } else {
+                r.reasons = vec![format!(
+                    "no sighting ties {} to the team: mapped alone in its own frame",
+                    f.name
+                )];
+            }
         }
         let mine: Vec<ScanInput> = own.iter().map(|&i| inputs[i].clone()).collect();
         alone.push((f.robot, build_map(&mine, &params.map, |_, _| {})?));

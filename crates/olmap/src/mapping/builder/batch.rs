@@ -235,7 +235,9 @@ impl Batch<'_, '_> {
             .cached
             .take()
             .expect("chosen from the cache");
-        if !self.pending[s].provisional {
+        // A scan placed by a two-way sighting alone has nothing the map could confirm.
+        if !self.pending[s].provisional || matches!(c.via, Placement::MutualSighting { .. }) {
+            self.pending[s].provisional = false;
             return Ok(Some(c));
         }
         self.pending[s].provisional = false;
@@ -270,7 +272,7 @@ impl Batch<'_, '_> {
             let by_odometry = self.pending[u]
                 .cached
                 .as_ref()
-                .is_some_and(|c| !matches!(c.via, Placement::Sighting { .. }));
+                .is_some_and(|c| c.via.linked_scan().is_none());
             if u != s && by_odometry && self.state.predicts_from(u) == Some(s) {
                 self.pending[u].forget();
             }

@@ -3,7 +3,7 @@
 
 use super::register::{keep_better, Found};
 use super::state::State;
-use crate::align::{Region, Registration};
+use crate::align::{consistency, Region, Registration};
 use crate::error::Result;
 use crate::geometry::Pose;
 use crate::mapping::links::{Placement, ScanLink};
@@ -52,9 +52,50 @@ impl State<'_> {
                     via,
                 }));
             }
+            if let ScanLink::Mutual { other, .. } = link {
+                if let Some(alone) = self.mutual_alone(s, &prior, &r)? {
+                    return Ok(Some(Found {
+                        registration: alone,
+                        via: Placement::MutualSighting { other: *other },
+                    }));
+                }
+            }
             keep_better(best, r, via);
         }
         Ok(None)
+    }
+
+    /// A two-way sighting's pose `prior` for scan `s` when its map search `r` (in the
+    /// sighting's window) was not trusted: accepted as [`Placement::MutualSighting`] when
+    /// the map does not contradict it there — the scan's surfaces at `prior` agree with
+    /// the map where the map looked ([`consistency`], at least the trust rule's
+    /// `min_agreement`; a scan the map never saw agrees) — and the search was not refused
+    /// for a contradiction of its own. The result is `r` moved to `prior`, trusted, without
+    /// doubts (they only said that the map could not confirm the sighting), with the
+    /// agreement at `prior`.
+    fn mutual_alone(
+        &self,
+        s: usize,
+        prior: &Pose,
+        r: &Registration,
+    ) -> Result<Option<Registration>> {
+        let trust = &self.params.register.trust;
+        if r.consistency
+            .as_ref()
+            .is_some_and(|c| c.agreement() < trust.min_agreement)
+        {
+            return Ok(None);
+        }
+        let c = consistency(&self.clouds[s], &self.target, None, prior)?;
+        if c.agreement() < trust.min_agreement {
+            return Ok(None);
+        }
+        let mut alone = r.clone();
+        alone.pose = *prior;
+        alone.trusted = true;
+        alone.doubts.clear();
+        alone.consistency = Some(c);
+        Ok(Some(alone))
     }
 
     /// Whether scan `s` waits for a link ([`TeamLinks::hold_unlinked`]): no scan of its
