@@ -156,14 +156,14 @@ pub enum Placement {
 
 impl Placement {
     /// A short label for reports: `frame`, `odometry`, `global`, `sighting (6.x)`,
-    /// `mutual sighting alone (6.4)`.
+    /// `sighting (6.4) alone`.
     pub fn label(&self) -> String {
         match self {
             Placement::Frame => "frame".into(),
             Placement::Odometry => "odometry".into(),
             Placement::Global => "global".into(),
             Placement::Sighting { equation, .. } => format!("sighting {equation}"),
-            Placement::MutualSighting { .. } => "mutual sighting alone (6.4)".into(),
+            Placement::MutualSighting { .. } => "sighting (6.4) alone".into(),
         }
     }
 
