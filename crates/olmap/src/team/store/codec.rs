@@ -138,6 +138,33 @@ impl ScanStore {
     }
 }
 
+impl StoredScan {
+    /// The record's body in the store file's encoding (the `body` of a record frame on
+    /// [`ScanStore::write`]): what crosses the network in `olmap-net`. Same record, same
+    /// bytes; [`StoredScan::decode_record`] reads it back identical.
+    pub fn encode_record(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(64 + self.cloud.len() * 12);
+        // Counts above u32 (4 G sightings) cannot occur in a checked record; a record
+        // that held them would fail to decode, never be misread.
+        if encode_scan(self, &mut out).is_err() {
+            out.clear();
+        }
+        out
+    }
+
+    /// Reads a record body written by [`StoredScan::encode_record`]: every count checked
+    /// against the bytes present before allocating, every number finite, nothing left
+    /// over; any problem is a [`ParseError`] with its byte offset.
+    pub fn decode_record(bytes: &[u8]) -> Result<StoredScan, ParseError> {
+        let frame = Frame {
+            body_start: 0,
+            body_end: bytes.len(),
+            end: bytes.len(),
+        };
+        decode_body(bytes, &frame)
+    }
+}
+
 // ---- encoding ----
 
 fn len_u32(n: usize) -> std::io::Result<u32> {

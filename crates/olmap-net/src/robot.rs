@@ -1,0 +1,156 @@
+//! The robot role: replay one robot of a recorded dataset in real time, turning each scan
+//! into what robots exchange, storing it durably and publishing it.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use olmap::team::{ScanStore, StoredScan};
+
+use crate::error::{NetError, Result};
+use crate::node::{Node, NodeOptions};
+
+/// What a robot node replays and how.
+#[derive(Debug, Clone)]
+pub struct RobotOptions {
+    /// The dataset folder (`olmap simulate` output).
+    pub dataset: PathBuf,
+    /// The robot's name in the dataset, e.g. `robot0` (also the node's name).
+    pub robot: String,
+    /// Stops replayed per second (default 1).
+    pub rate: f64,
+    /// The team's finest resolution, metres (default 0.1): each scan is sent as its
+    /// occupancy list at this resolution — one point per occupied voxel, the mean of the
+    /// points in it — with the sensor origin, odometry and sightings.
+    pub resolution: f64,
+    /// The node (its name is the robot's name).
+    pub node: NodeOptions,
+}
+
+/// What a replay did.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct RobotSummary {
+    /// The robot's id in the dataset.
+    pub robot: u32,
+    /// Stops in the dataset.
+    pub stops: usize,
+    /// Stops recorded and published by this run.
+    pub published: usize,
+    /// Stops already in the store (a restarted robot does not record them again).
+    pub resumed: usize,
+    /// Points of the raw scans published, in all.
+    pub raw_points: u64,
+    /// Points of the occupancy lists published, in all.
+    pub list_points: u64,
+    /// Bytes of record payloads published, in all.
+    pub bytes: u64,
+}
+
+/// A scan turned into what crosses the network: its cloud replaced by the occupancy list
+/// at `resolution` (one point per occupied voxel: the mean of its points, attributes
+/// averaged), everything else as recorded.
+pub fn occupancy_record(scan: &StoredScan, resolution: f64) -> Result<StoredScan> {
+    let cloud = scan.cloud.voxel_downsample(resolution)?;
+    Ok(StoredScan {
+        cloud,
+        ..scan.clone()
+    })
+}
+
+/// Reads robot `name`'s records from a dataset folder: its id and its scans in seq order
+/// (a scan file that cannot be read is skipped with a warning on stderr).
+pub fn robot_records(dataset: &std::path::Path, name: &str) -> Result<(u32, Vec<StoredScan>)> {
+    let data = olmap::sim::read_dataset(dataset)?;
+    let (store, skipped) = data.to_store_skipping()?;
+    for s in data.skipped.iter().chain(&skipped) {
+        eprintln!("warning: skipped {}: {}", s.path, s.reason);
+    }
+    let robot = store
+        .robots()
+        .into_iter()
+        .find(|&r| store.robot_name(r) == name)
+        .ok_or_else(|| {
+            let names: Vec<String> = store
+                .robots()
+                .iter()
+                .map(|&r| store.robot_name(r))
+                .collect();
+            NetError::InvalidArgument(format!(
+                "no robot '{name}' in {} (it has {})",
+                dataset.display(),
+                names.join(", ")
+            ))
+        })?;
+    Ok((robot, store.scans_of(robot).cloned().collect()))
+}
+
+/// Replays one robot: starts its node, then at each stop (`1 / rate` seconds apart) stores
+/// and publishes the stop's occupancy-list record, skipping stops its store already holds
+/// (a robot restarted after a kill resumes where it was). Calls `on_stop(seq, summary)`
+/// after each stop. Returns with the node still running (it keeps serving its store: the
+/// caller decides how long), or early when `stop` is set.
+pub fn run_robot(
+    opts: &RobotOptions,
+    stop: &AtomicBool,
+    mut on_stop: impl FnMut(u32, &RobotSummary),
+) -> Result<(Node, RobotSummary)> {
+    if !(opts.rate.is_finite() && opts.rate > 0.0 && opts.rate <= 1000.0) {
+        return Err(NetError::InvalidArgument(format!(
+            "--rate {} must be a number of stops per second in (0, 1000]",
+            opts.rate
+        )));
+    }
+    let (robot, scans) = robot_records(&opts.dataset, &opts.robot)?;
+    replay(opts, robot, &scans, stop, &mut on_stop)
+}
+
+/// [`run_robot`] on records already read (tests, demos).
+pub fn replay(
+    opts: &RobotOptions,
+    robot: u32,
+    scans: &[StoredScan],
+    stop: &AtomicBool,
+    on_stop: &mut dyn FnMut(u32, &RobotSummary),
+) -> Result<(Node, RobotSummary)> {
+    let node = Node::start(opts.node.clone())?;
+    let mut summary = RobotSummary {
+        robot,
+        stops: scans.len(),
+        ..RobotSummary::default()
+    };
+    let period = Duration::from_secs_f64(1.0 / opts.rate);
+    let start = Instant::now();
+    for (i, scan) in scans.iter().enumerate() {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        if node.holds(robot, scan.seq) {
+            summary.resumed += 1;
+            continue;
+        }
+        let due = start + period.mul_f64(i as f64);
+        while Instant::now() < due && !stop.load(Ordering::Relaxed) {
+            std::thread::sleep((due - Instant::now()).min(Duration::from_millis(50)));
+        }
+        let record = occupancy_record(scan, opts.resolution)?;
+        summary.raw_points += scan.cloud.len() as u64;
+        summary.list_points += record.cloud.len() as u64;
+        let before = node.counters().record_bytes_published;
+        node.record(&opts.robot, record)?;
+        summary.bytes += node.counters().record_bytes_published - before;
+        summary.published += 1;
+        on_stop(scan.seq, &summary);
+    }
+    Ok((node, summary))
+}
+
+/// Every robot's records of a store, as a robot replays them (tests and benches): the
+/// occupancy-list records at `resolution`.
+pub fn occupancy_store(store: &ScanStore, resolution: f64) -> Result<ScanStore> {
+    let mut out = ScanStore::new();
+    for scan in store.iter() {
+        out.set_robot_name(scan.robot, &store.robot_name(scan.robot))?;
+        out.insert(occupancy_record(scan, resolution)?)?;
+    }
+    Ok(out)
+}
