@@ -13,6 +13,8 @@
 
 mod args;
 mod commands;
+#[cfg(feature = "net")]
+mod signals;
 
 use std::process::ExitCode;
 
@@ -96,6 +98,18 @@ enum Command {
     /// Ask a map: occupied at a point, first hit along a ray, voxels near a point, free
     /// segment.
     Query(commands::query::QueryArgs),
+    /// Live team (Zenoh): replay one robot of a dataset in real time, publishing each stop's
+    /// occupancy list and serving every record it holds (`--map`: map as well).
+    #[cfg(feature = "net")]
+    Robot(commands::net::RobotArgs),
+    /// Live team (Zenoh): merge every robot's records into a persistent store, map them as
+    /// they arrive, serve the map; writes the outputs on SIGINT/SIGTERM.
+    #[cfg(feature = "net")]
+    Mapper(commands::net::MapperArgs),
+    /// Live team (Zenoh): a status line per node (alive, records, placed scans, latency)
+    /// until a mapper has placed N scans or time is up.
+    #[cfg(feature = "net")]
+    Watch(commands::net::WatchArgs),
 }
 
 /// Restores the default action of SIGPIPE (end the process), which the Rust runtime sets to
@@ -137,6 +151,12 @@ fn main() -> ExitCode {
         Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Team(a) => commands::team::run(&a),
+        #[cfg(feature = "net")]
+        Command::Robot(a) => commands::net::run_robot_cmd(&a),
+        #[cfg(feature = "net")]
+        Command::Mapper(a) => commands::net::run_mapper_cmd(&a),
+        #[cfg(feature = "net")]
+        Command::Watch(a) => commands::net::run_watch_cmd(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Store(a) => commands::store::run(&a),
         Command::Grid2d(a) => commands::grid2d::run(&a),

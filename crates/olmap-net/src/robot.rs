@@ -84,35 +84,42 @@ pub fn robot_records(dataset: &std::path::Path, name: &str) -> Result<(u32, Vec<
     Ok((robot, store.scans_of(robot).cloned().collect()))
 }
 
-/// Replays one robot: starts its node, then at each stop (`1 / rate` seconds apart) stores
-/// and publishes the stop's occupancy-list record, skipping stops its store already holds
-/// (a robot restarted after a kill resumes where it was). Calls `on_stop(seq, summary)`
-/// after each stop. Returns with the node still running (it keeps serving its store: the
-/// caller decides how long), or early when `stop` is set.
+/// Replays one robot: starts its node, then [`replay_on`] it. Returns with the node still
+/// running (it keeps serving its store: the caller decides how long).
 pub fn run_robot(
     opts: &RobotOptions,
     stop: &AtomicBool,
     mut on_stop: impl FnMut(u32, &RobotSummary),
 ) -> Result<(Node, RobotSummary)> {
-    if !(opts.rate.is_finite() && opts.rate > 0.0 && opts.rate <= 1000.0) {
-        return Err(NetError::InvalidArgument(format!(
-            "--rate {} must be a number of stops per second in (0, 1000]",
-            opts.rate
-        )));
-    }
+    check_rate(opts.rate)?;
     let (robot, scans) = robot_records(&opts.dataset, &opts.robot)?;
-    replay(opts, robot, &scans, stop, &mut on_stop)
+    let node = Node::start(opts.node.clone())?;
+    let summary = replay_on(&node, opts, robot, &scans, stop, &mut on_stop)?;
+    Ok((node, summary))
 }
 
-/// [`run_robot`] on records already read (tests, demos).
-pub fn replay(
+fn check_rate(rate: f64) -> Result<()> {
+    if !(rate.is_finite() && rate > 0.0 && rate <= 1000.0) {
+        return Err(NetError::InvalidArgument(format!(
+            "--rate {rate} must be a number of stops per second in (0, 1000]"
+        )));
+    }
+    Ok(())
+}
+
+/// Replays robot `robot`'s `scans` on a running node: at each stop (`1 / rate` seconds
+/// apart) stores and publishes the stop's occupancy-list record, skipping stops the store
+/// already holds (a robot restarted after a kill resumes where it was). Calls
+/// `on_stop(seq, summary)` after each stop; returns early when `stop` is set.
+pub fn replay_on(
+    node: &Node,
     opts: &RobotOptions,
     robot: u32,
     scans: &[StoredScan],
     stop: &AtomicBool,
     on_stop: &mut dyn FnMut(u32, &RobotSummary),
-) -> Result<(Node, RobotSummary)> {
-    let node = Node::start(opts.node.clone())?;
+) -> Result<RobotSummary> {
+    check_rate(opts.rate)?;
     let mut summary = RobotSummary {
         robot,
         stops: scans.len(),
@@ -128,7 +135,7 @@ pub fn replay(
             summary.resumed += 1;
             continue;
         }
-        let due = start + period.mul_f64(i as f64);
+        let due = start + period.mul_f64((i - summary.resumed) as f64);
         while Instant::now() < due && !stop.load(Ordering::Relaxed) {
             std::thread::sleep((due - Instant::now()).min(Duration::from_millis(50)));
         }
@@ -141,7 +148,7 @@ pub fn replay(
         summary.published += 1;
         on_stop(scan.seq, &summary);
     }
-    Ok((node, summary))
+    Ok(summary)
 }
 
 /// Every robot's records of a store, as a robot replays them (tests and benches): the

@@ -23,7 +23,15 @@ fn good(robot: u32, seq: u32, points: usize) -> Vec<u8> {
 fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut opts = node_opts(dir.path(), "mapper", "mapper", "bad", Some(port), &[], FaultPlan::default());
+    let mut opts = node_opts(
+        dir.path(),
+        "mapper",
+        "mapper",
+        "bad",
+        Some(port),
+        &[],
+        FaultPlan::default(),
+    );
     opts.max_payload = 64 << 10;
     let mapper = Node::start(opts).unwrap();
     let keys = Keys::new("bad").unwrap();
@@ -44,11 +52,17 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
     let mut random = Vec::new();
     let mut s = 0x1234_5678u64;
     for _ in 0..3000 {
-        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         random.push((s >> 33) as u8);
     }
     let bad: Vec<(String, Vec<u8>, &str)> = vec![
-        (keys.record(0, 0), good(0, 0, 50)[..40].to_vec(), "truncated"),
+        (
+            keys.record(0, 0),
+            good(0, 0, 50)[..40].to_vec(),
+            "truncated",
+        ),
         (keys.record(0, 1), good(0, 1, 10_000), "oversized"),
         (keys.record(0, 2), wrong_version, "wrong_version"),
         (keys.record(0, 3), wrong_checksum, "bad_checksum"),
@@ -58,9 +72,17 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
         // A digest sealed as a record.
         (keys.record(0, 6), seal(Kind::Digest, b"xx"), "wrong_kind"),
         // A well-sealed record body that does not decode.
-        (keys.record(0, 7), seal(Kind::Record, &[1, 0, b'a', 0, 0]), "malformed"),
+        (
+            keys.record(0, 7),
+            seal(Kind::Record, &[1, 0, b'a', 0, 0]),
+            "malformed",
+        ),
         (keys.digest("evil"), random.clone(), "bad_magic"),
-        (format!("{}/rec/x/y", keys.prefix()), good(0, 8, 50), "wrong_key"),
+        (
+            format!("{}/rec/x/y", keys.prefix()),
+            good(0, 8, 50),
+            "wrong_key",
+        ),
     ];
     for (key, payload, _) in &bad {
         attacker.put(key, payload.clone()).wait().unwrap();
@@ -83,11 +105,18 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
     assert_eq!(mapper.held(), 0, "a bad payload was stored");
     assert_eq!(c.refused_total(), expected_total, "{:?}", c.refused);
     for (_, _, reason) in &bad {
-        assert!(c.refused.get(*reason).copied().unwrap_or(0) >= 1, "{reason}: {:?}", c.refused);
+        assert!(
+            c.refused.get(*reason).copied().unwrap_or(0) >= 1,
+            "{reason}: {:?}",
+            c.refused
+        );
     }
 
     // Still alive: a good record is stored.
-    attacker.put(keys.record(2, 0), good(2, 0, 50)).wait().unwrap();
+    attacker
+        .put(keys.record(2, 0), good(2, 0, 50))
+        .wait()
+        .unwrap();
     assert!(mapper.wait_for(1, Duration::from_secs(10)));
     assert!(mapper.holds(2, 0));
     // A different record under a held key is a conflict, never stored.

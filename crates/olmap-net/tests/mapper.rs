@@ -43,7 +43,15 @@ fn the_network_mapper_maps_what_olmap_team_maps_from_the_same_records() {
         partitions: Vec::new(),
     };
     let mapper = Mapper::start(MapperOptions {
-        node: node_opts(dir.path(), "mapper", "mapper", "maptest", Some(port), &[], faults(1)),
+        node: node_opts(
+            dir.path(),
+            "mapper",
+            "mapper",
+            "maptest",
+            Some(port),
+            &[],
+            faults(1),
+        ),
         out: out.clone(),
         params: TeamParams::default(),
         truth: Some(truth.clone()),
@@ -70,12 +78,17 @@ fn the_network_mapper_maps_what_olmap_team_maps_from_the_same_records() {
         robots.push(node);
     }
     assert!(
-        mapper.node().wait_for(records.len(), Duration::from_secs(60)),
+        mapper
+            .node()
+            .wait_for(records.len(), Duration::from_secs(60)),
         "the mapper holds {}/{}",
         mapper.node().held(),
         records.len()
     );
-    assert_eq!(store_bytes(&mapper.node().store_snapshot()), store_bytes(&records));
+    assert_eq!(
+        store_bytes(&mapper.node().store_snapshot()),
+        store_bytes(&records)
+    );
     // The live map catches up: a run over every record completes and reports figures.
     let deadline = Instant::now() + Duration::from_secs(600);
     while mapper.node().status().placed == 0 && Instant::now() < deadline {
@@ -83,11 +96,20 @@ fn the_network_mapper_maps_what_olmap_team_maps_from_the_same_records() {
     }
     let status = mapper.node().status();
     assert!(status.placed > 0 && status.map_runs > 0, "{status:?}");
-    assert!(status.latency_ms.is_some(), "no latency figures: {status:?}");
+    assert!(
+        status.latency_ms.is_some(),
+        "no latency figures: {status:?}"
+    );
 
     let written = mapper.write_outputs().unwrap();
     assert_eq!(written.records, records.len());
-    for name in ["team.olm", "team_poses.txt", "team.store", "report.json", "net.json"] {
+    for name in [
+        "team.olm",
+        "team_poses.txt",
+        "team.store",
+        "report.json",
+        "net.json",
+    ] {
         assert!(out.join(name).is_file(), "{name} missing");
     }
     // `olmap team` on the same records, in one process: the same bytes.

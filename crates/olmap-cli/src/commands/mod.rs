@@ -15,6 +15,8 @@ pub mod map;
 pub mod merge;
 pub mod mutual;
 pub mod navgrid;
+#[cfg(feature = "net")]
+pub mod net;
 pub mod poses;
 pub mod query;
 pub mod render;

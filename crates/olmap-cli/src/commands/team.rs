@@ -9,16 +9,22 @@ use clap::Args;
 use olmap::mapping::posegraph::GraphRefineParams;
 use olmap::sim::read_dataset;
 use olmap::team::report::ErrorSummaryReport;
-use olmap::team::{run_team_pipeline, TeamJob, TeamParams, TeamRun};
+use olmap::team::{run_team_pipeline, ScanStore, TeamJob, TeamParams, TeamRun};
 
 use crate::args::StageBars;
 
 /// Arguments of `olmap team`.
 #[derive(Args)]
 pub struct TeamArgs {
-    /// A dataset folder written by `olmap simulate` (manifest.json, robotN/, sightings.csv).
-    /// A scan or pose file that cannot be read is skipped with a warning.
-    pub dataset: PathBuf,
+    /// A dataset folder written by `olmap simulate` (manifest.json, robotN/, sightings.csv;
+    /// a scan or pose file that cannot be read is skipped with a warning), or one or more
+    /// scan-store files (`.store`, e.g. what `olmap robot` / `olmap mapper` hold, exported),
+    /// merged into one.
+    #[arg(required = true, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
+    /// With store files: the dataset folder that holds the ground truth to evaluate against.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
     /// Output folder (created if missing): team.olm / .ply / .bt, team_poses.txt,
     /// team.store, report.json, report.html (and solo/ with --solo).
     #[arg(short, long)]
@@ -43,12 +49,35 @@ pub struct TeamArgs {
 
 /// Runs `olmap team`.
 pub fn run(args: &TeamArgs) -> anyhow::Result<ExitCode> {
-    let data = read_dataset(&args.dataset)?;
-    let (store, skipped_scans) = data.to_store_skipping()?;
-    for s in data.skipped.iter().chain(&skipped_scans) {
-        eprintln!("warning: skipped {}: {}", s.path, s.reason);
-    }
-    let truth = data.has_truth().then(|| data.truth_list(&store));
+    let (store, truth) = match args.inputs.as_slice() {
+        [dir] if dir.is_dir() => {
+            if args.truth.is_some() {
+                anyhow::bail!("--truth is for store files: a dataset folder carries its own truth");
+            }
+            dataset_store(dir)?
+        }
+        files => {
+            let mut store = ScanStore::new();
+            for f in files {
+                if f.is_dir() {
+                    anyhow::bail!(
+                        "{} is a folder: give one dataset folder, or scan-store files",
+                        f.display()
+                    );
+                }
+                store
+                    .merge(&ScanStore::read(f)?)
+                    .map_err(|e| anyhow::anyhow!("merging {}: {e}", f.display()))?;
+            }
+            // Truth for the scans the dataset holds, named as the team map names them
+            // (the stores of robots replaying it use the dataset's robot names).
+            let truth = match &args.truth {
+                Some(dir) => dataset_store(dir)?.1,
+                None => None,
+            };
+            (store, truth)
+        }
+    };
     if truth.is_none() {
         eprintln!("warning: without every robot's ground truth the maps are not evaluated");
     }
@@ -77,6 +106,17 @@ pub fn run(args: &TeamArgs) -> anyhow::Result<ExitCode> {
         print!("{}", table(&run, &args.out));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A dataset folder's store and (when every robot has it) ground truth.
+fn dataset_store(dir: &Path) -> anyhow::Result<(ScanStore, Option<olmap::geometry::PoseList>)> {
+    let data = read_dataset(dir)?;
+    let (store, skipped_scans) = data.to_store_skipping()?;
+    for s in data.skipped.iter().chain(&skipped_scans) {
+        eprintln!("warning: skipped {}: {}", s.path, s.reason);
+    }
+    let truth = data.has_truth().then(|| data.truth_list(&store));
+    Ok((store, truth))
 }
 
 /// One row of the error table.

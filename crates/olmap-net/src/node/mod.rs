@@ -436,6 +436,9 @@ impl Node {
             .faults
             .is_active()
             .then(|| Faults::new(opts.faults.clone()));
+        // A node resuming from a non-empty store starts one generation in, so that a
+        // mapper maps what it already holds.
+        let generation = u64::from(!store.store().is_empty());
         let shared = Arc::new(Shared {
             keys: keys.clone(),
             start: Instant::now(),
@@ -444,7 +447,7 @@ impl Node {
             sent_ns: Mutex::new(HashMap::new()),
             faults: Mutex::new(faults),
             wants: Mutex::new(BTreeMap::new()),
-            generation: Mutex::new(0),
+            generation: Mutex::new(generation),
             changed: Condvar::new(),
             stop: AtomicBool::new(false),
             logged: Mutex::new(HashSet::new()),

@@ -1,0 +1,242 @@
+//! The live team as processes on loopback: a mapper, two robots with 20 % message loss,
+//! the mapper killed with SIGKILL half way and restarted on its store, `olmap watch` until
+//! every scan is placed, then SIGTERM: the mapper writes a store holding every record and
+//! the map `olmap team` builds from that store in one process.
+
+#![cfg(all(unix, feature = "net"))]
+
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn olmap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_olmap"))
+        .args(args)
+        .output()
+        .expect("run olmap")
+}
+
+/// A child process killed (SIGKILL) when dropped, so that a failing test leaves nothing
+/// running.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn spawn(args: &[String], log: &Path) -> Proc {
+    let err = std::fs::File::create(log).unwrap();
+    Proc(
+        Command::new(env!("CARGO_BIN_EXE_olmap"))
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(err)
+            .spawn()
+            .expect("start olmap"),
+    )
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn signal(p: &Proc, sig: libc::c_int) {
+    // SAFETY: sending a signal to our own child's pid.
+    unsafe {
+        libc::kill(p.0.id() as libc::pid_t, sig);
+    }
+}
+
+fn wait_exit(p: &mut Proc, limit: Duration) -> Option<std::process::ExitStatus> {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if let Ok(Some(s)) = p.0.try_wait() {
+            return Some(s);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    None
+}
+
+fn s(v: &[&str]) -> Vec<String> {
+    v.iter().map(|x| x.to_string()).collect()
+}
+
+#[test]
+fn a_mapper_killed_half_way_resumes_and_ends_with_every_record_and_olmap_teams_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let data = d("data");
+    let sim = olmap(&[
+        "simulate",
+        "--world",
+        "lab",
+        "--robots",
+        "2",
+        "--scans-per-robot",
+        "3",
+        "--odometry",
+        "degraded",
+        "--seed",
+        "2",
+        "-o",
+        &data,
+    ]);
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let port = free_port();
+    let listen = format!("tcp/127.0.0.1:{port}");
+    let net = |extra: &[&str]| {
+        let mut v = s(&["--team", "proc", "--no-scouting", "--period", "0.2"]);
+        v.extend(s(extra));
+        v
+    };
+    let mapper_args = {
+        let mut v = s(&[
+            "mapper",
+            "--store",
+            &d("mapper.redb"),
+            "-o",
+            &d("out"),
+            "--truth",
+            &data,
+            "--listen",
+            &listen,
+        ]);
+        v.extend(net(&[]));
+        v
+    };
+    let mut mapper = spawn(&mapper_args, &dir.path().join("mapper1.log"));
+    std::thread::sleep(Duration::from_millis(500));
+    let mut robots = Vec::new();
+    for r in 0..2 {
+        let name = format!("robot{r}");
+        let mut v = s(&[
+            "robot",
+            "--dataset",
+            &data,
+            "--robot",
+            &name,
+            "--rate",
+            "1",
+            "--store",
+            &d(&format!("{name}.redb")),
+            "--connect",
+            &listen,
+        ]);
+        v.extend(net(&[
+            "--fault-drop",
+            "0.2",
+            "--fault-seed",
+            &r.to_string(),
+        ]));
+        robots.push(spawn(&v, &dir.path().join(format!("{name}.log"))));
+    }
+    // Half way (stops go out at 0, 1 and 2 s): kill the mapper, restart it on its store.
+    std::thread::sleep(Duration::from_millis(1500));
+    signal(&mapper, libc::SIGKILL);
+    assert!(wait_exit(&mut mapper, Duration::from_secs(10)).is_some());
+    std::thread::sleep(Duration::from_millis(500));
+    let mut mapper = spawn(&mapper_args, &dir.path().join("mapper2.log"));
+    // The restarted mapper resumes from its store: what it held when killed (fewer than
+    // the 6 records: the third stops go out 2 s after the robots start).
+    let resumed = (0..100)
+        .find_map(|_| {
+            std::thread::sleep(Duration::from_millis(100));
+            let log = std::fs::read_to_string(dir.path().join("mapper2.log")).ok()?;
+            let n = log
+                .split("resumed with ")
+                .nth(1)?
+                .split(' ')
+                .next()?
+                .parse::<usize>()
+                .ok()?;
+            Some(n)
+        })
+        .expect("the restarted mapper reports what it resumed with");
+    eprintln!("the restarted mapper resumed with {resumed} records");
+    assert!(resumed < 6);
+    // Every scan placed (the watch exits 0), within a bound far above the mapping time.
+    let watch = olmap(&[
+        "watch",
+        "--until-placed",
+        "6",
+        "--timeout",
+        "120",
+        "--json",
+        "--connect",
+        &listen,
+        "--team",
+        "proc",
+        "--no-scouting",
+    ]);
+    let log = std::fs::read_to_string(dir.path().join("mapper2.log")).unwrap_or_default();
+    assert!(
+        watch.status.success(),
+        "watch: {}\nmapper: {log}",
+        String::from_utf8_lossy(&watch.stdout)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&watch.stdout).unwrap();
+    assert!(
+        summary["nodes"]["mapper"]["placed"].as_u64().unwrap() >= 6,
+        "{summary}"
+    );
+    // SIGTERM: the mapper writes its outputs and exits 0.
+    signal(&mapper, libc::SIGTERM);
+    let status = wait_exit(&mut mapper, Duration::from_secs(400)).expect("the mapper exits");
+    assert!(
+        status.success(),
+        "{}",
+        std::fs::read_to_string(dir.path().join("mapper2.log")).unwrap_or_default()
+    );
+    for r in &robots {
+        signal(r, libc::SIGTERM);
+    }
+    for r in &mut robots {
+        assert!(wait_exit(r, Duration::from_secs(20)).is_some_and(|s| s.success()));
+    }
+    // Nothing lost: 3 records of each robot in the mapper's store.
+    let info = olmap(&["store", "info", "--json", &d("out/team.store")]);
+    assert!(info.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(v["records"].as_u64(), Some(6), "{v}");
+    // `olmap team` on that store in one process: identical map and poses.
+    let single = olmap(&[
+        "team",
+        &d("out/team.store"),
+        "--truth",
+        &data,
+        "-o",
+        &d("single"),
+        "--json",
+    ]);
+    assert!(
+        single.status.success(),
+        "{}",
+        String::from_utf8_lossy(&single.stderr)
+    );
+    for name in ["team.olm", "team_poses.txt"] {
+        assert_eq!(
+            std::fs::read(dir.path().join("out").join(name)).unwrap(),
+            std::fs::read(dir.path().join("single").join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    let report: serde_json::Value = serde_json::from_slice(&single.stdout).unwrap();
+    let team = &report["evaluation"]["team"];
+    assert_eq!(team["placed"].as_u64(), Some(6), "{team}");
+    let net: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/net.json")).unwrap())
+            .unwrap();
+    assert_eq!(net["records"].as_u64(), Some(6), "{net}");
+}
