@@ -58,6 +58,7 @@
 //! file (`--zenoh-config`, see the README). Payloads over a size cap and records over a
 //! per-robot rate are dropped ([`NodeOptions::max_payload`], [`NodeOptions::max_rate`]).
 
+pub mod bench;
 mod durable;
 mod error;
 mod fault;

@@ -20,8 +20,8 @@ pub struct RobotOptions {
     /// Stops replayed per second (default 1).
     pub rate: f64,
     /// The team's finest resolution, metres (default 0.1): each scan is sent as its
-    /// occupancy list at this resolution — one point per occupied voxel, the mean of the
-    /// points in it — with the sensor origin, odometry and sightings.
+    /// occupancy list at this resolution — the occupied voxels' keys — with the sensor
+    /// origin, odometry and sightings. Must equal the node's `list_resolution`.
     pub resolution: f64,
     /// The node (its name is the robot's name).
     pub node: NodeOptions,
@@ -47,10 +47,16 @@ pub struct RobotSummary {
 }
 
 /// A scan turned into what crosses the network: its cloud replaced by the occupancy list
-/// at `resolution` (one point per occupied voxel: the mean of its points, attributes
-/// averaged), everything else as recorded.
+/// at `resolution` (one point per occupied voxel: its centre, in key order; attributes
+/// dropped), everything else as recorded.
 pub fn occupancy_record(scan: &StoredScan, resolution: f64) -> Result<StoredScan> {
-    let cloud = scan.cloud.voxel_downsample(resolution)?;
+    let cloud = crate::protocol::occupancy_list(&scan.cloud, resolution).ok_or_else(|| {
+        NetError::InvalidArgument(format!(
+            "scan {} of robot {}: no occupancy list at {resolution} m (a resolution must be \
+             positive, and every point within ±104,000 voxels of the origin)",
+            scan.seq, scan.robot
+        ))
+    })?;
     Ok(StoredScan {
         cloud,
         ..scan.clone()
@@ -93,7 +99,9 @@ pub fn run_robot(
 ) -> Result<(Node, RobotSummary)> {
     check_rate(opts.rate)?;
     let (robot, scans) = robot_records(&opts.dataset, &opts.robot)?;
-    let node = Node::start(opts.node.clone())?;
+    let mut node_opts = opts.node.clone();
+    node_opts.list_resolution = opts.resolution;
+    let node = Node::start(node_opts)?;
     let summary = replay_on(&node, opts, robot, &scans, stop, &mut on_stop)?;
     Ok((node, summary))
 }

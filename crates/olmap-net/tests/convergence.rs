@@ -23,6 +23,9 @@ struct Schedule {
     late: Option<u32>,
     /// Close the mapper after this many robots have recorded, and reopen it from its store.
     restart_mapper_after: Option<u32>,
+    /// A robot (by index) that leaves half way through its stops and comes back on its
+    /// store.
+    comes_back: Option<u32>,
 }
 
 fn plan(drop: f64, duplicate: f64, reorder: usize, seed: u64) -> FaultPlan {
@@ -41,6 +44,7 @@ fn schedules() -> Vec<Schedule> {
         plan,
         late,
         restart_mapper_after,
+        comes_back: None,
     };
     let partition = |mut p: FaultPlan, a: u64, b: u64| {
         p.partitions = vec![(Duration::from_millis(a), Duration::from_millis(b))];
@@ -83,6 +87,15 @@ fn schedules() -> Vec<Schedule> {
             None,
             Some(2),
         ),
+        Schedule {
+            comes_back: Some(2),
+            ..s(
+                "robot leaves and comes back, drop 30 %",
+                plan(0.3, 0.0, 0, 11),
+                None,
+                None,
+            )
+        },
     ]
 }
 
@@ -118,7 +131,7 @@ fn run(schedule: &Schedule, index: usize) {
         .collect();
     for (done, &r) in order.iter().enumerate() {
         let name = format!("robot{r}");
-        let node = Node::start(node_opts(
+        let opts = node_opts(
             dir.path(),
             &name,
             "robot",
@@ -126,11 +139,23 @@ fn run(schedule: &Schedule, index: usize) {
             None,
             &[port],
             seeded(r as u64),
-        ))
-        .unwrap();
+        );
+        let mut node = Node::start(opts.clone()).unwrap();
         // Let the link come up, then record at 50 Hz.
         std::thread::sleep(Duration::from_millis(200));
         for s in 0..SCANS {
+            if schedule.comes_back == Some(r) && s == SCANS / 2 {
+                let held = node.held();
+                node.close();
+                std::thread::sleep(Duration::from_millis(300));
+                node = Node::start(opts.clone()).unwrap();
+                assert_eq!(
+                    node.held(),
+                    held,
+                    "{}: the robot's store lost records",
+                    schedule.name
+                );
+            }
             assert!(node.record(&name, record(r, s, POINTS)).unwrap());
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -205,7 +230,7 @@ fn run(schedule: &Schedule, index: usize) {
 }
 
 #[test]
-fn stores_converge_to_the_union_under_eleven_fault_schedules() {
+fn stores_converge_to_the_union_under_twelve_fault_schedules() {
     for (i, s) in schedules().iter().enumerate() {
         let t = Instant::now();
         run(s, i);

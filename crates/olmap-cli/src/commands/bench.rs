@@ -39,6 +39,12 @@ pub struct BenchArgs {
     /// Trust suite: the seed of the pairs (default 1).
     #[arg(long, default_value_t = 1, requires = "trust")]
     pub seed: u64,
+    /// Run the network figures instead (needs the `net` feature): bytes on the wire per
+    /// scan (occupancy list at 0.1 m against the raw cloud), publish→placement latency
+    /// with the demo's 4 robots publishing 10 stops at 1 stop/s each to a mapper over
+    /// loopback, and memory per placed scan. With --quick: 2 robots, 3 stops.
+    #[arg(long, conflicts_with = "trust")]
+    pub net: bool,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -114,6 +120,9 @@ fn run_trust(a: &BenchArgs) -> anyhow::Result<ExitCode> {
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     if a.trust {
         return run_trust(a);
+    }
+    if a.net {
+        return run_net(a);
     }
     let count = olmap::limits::thread_count(a.threads);
     if let Some(note) = count.note() {
@@ -235,4 +244,59 @@ fn print_table(v: &BenchReport) {
             b as f64 / 1048576.0
         );
     }
+}
+
+/// `olmap bench --net`.
+#[cfg(feature = "net")]
+fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
+    let mut opts = olmap_net::bench::NetBenchOptions::default();
+    if a.quick {
+        opts.robots = 2;
+        opts.stops = 3;
+    }
+    let json = a.json;
+    let r = olmap_net::bench::run_net_bench(&opts, |stage| {
+        if !json {
+            eprintln!("bench --net: {stage}");
+        }
+    })?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let kb = |b: f64| b / 1024.0;
+    println!(
+        "{} robots x {} stops at {} stop/s each, occupancy lists at {} m, loopback",
+        r.robots, r.stops, r.rate, r.resolution
+    );
+    println!(
+        "  bytes per scan: occupancy list {:.1} KiB (max {:.1}), raw cloud {:.1} KiB: {:.1}x less ({:.0} -> {:.0} points)",
+        kb(r.list_bytes_per_scan),
+        kb(r.list_bytes_max as f64),
+        kb(r.raw_bytes_per_scan),
+        r.raw_bytes_per_scan / r.list_bytes_per_scan,
+        r.points_raw,
+        r.points_list
+    );
+    match r.latency_ms {
+        Some([p50, p95, max]) => println!(
+            "  publish->placement latency: p50 {p50:.0} ms, p95 {p95:.0} ms, max {max:.0} ms ({} mapping runs)",
+            r.map_runs
+        ),
+        None => println!("  no scan placed: no latency"),
+    }
+    println!(
+        "  placed {}/{} scans in {:.1} s",
+        r.placed, r.published, r.wall_s
+    );
+    if let (Some(peak), Some(per)) = (r.peak_rss_mib, r.memory_per_placed_kib) {
+        println!("  peak memory {peak:.0} MiB (robots and mapper in one process), {per:.0} KiB per placed scan");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `olmap bench --net` without the `net` feature.
+#[cfg(not(feature = "net"))]
+fn run_net(_: &BenchArgs) -> anyhow::Result<ExitCode> {
+    anyhow::bail!("this olmap was built without the `net` feature: no network figures")
 }

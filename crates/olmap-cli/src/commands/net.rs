@@ -231,6 +231,19 @@ fn status_line(s: &NodeStatus, alive: bool) -> String {
     )
 }
 
+/// The final status line and what was written.
+fn print_written(status: &NodeStatus, written: Option<&olmap_net::mapper::MapperOutputs>) {
+    eprintln!("{}", status_line(status, true));
+    if let Some(w) = written {
+        println!(
+            "wrote {} ({} records, {} scans placed)",
+            w.out.display(),
+            w.records,
+            w.placed
+        );
+    }
+}
+
 fn wait_until_stopped(stop: &AtomicBool, limit: Option<Duration>) {
     let start = Instant::now();
     while !stop.load(Ordering::Relaxed) && limit.is_none_or(|l| start.elapsed() < l) {
@@ -252,6 +265,7 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
         args.net.options(),
     );
     args.node.apply(&mut node)?;
+    node.list_resolution = args.resolution;
     if args.map && args.out.is_none() {
         anyhow::bail!("--map needs --out FOLDER for the map it builds");
     }
@@ -324,15 +338,7 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
             }))?
         );
     } else {
-        eprintln!("{}", status_line(&status, true));
-        if let Some(w) = written {
-            println!(
-                "wrote {} ({} records, {} scans placed)",
-                w.out.display(),
-                w.records,
-                w.placed
-            );
-        }
+        print_written(&status, written.as_ref());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -383,14 +389,8 @@ pub fn run_mapper_cmd(args: &MapperArgs) -> anyhow::Result<ExitCode> {
     mapper.close();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&status)?);
-    } else if let Some(w) = written {
-        eprintln!("{}", status_line(&status, true));
-        println!(
-            "wrote {} ({} records, {} scans placed)",
-            w.out.display(),
-            w.records,
-            w.placed
-        );
+    } else {
+        print_written(&status, written.as_ref());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -272,7 +272,10 @@ impl Shared {
                         sent_ns: sent.get(&(req.robot, seq)).copied().unwrap_or(0),
                         scan: scan.clone(),
                     };
-                    (self.keys.record(req.robot, seq), msg.encode())
+                    (
+                        self.keys.record(req.robot, seq),
+                        msg.encode_at(Some(self.opts.list_resolution)),
+                    )
                 })
                 .collect()
         };
@@ -412,6 +415,29 @@ impl Shared {
     }
 }
 
+/// A thread handing every item a Zenoh channel delivers to `handle`, until the node stops
+/// or the channel closes.
+fn serve<T: Send + 'static, H>(
+    shared: &Arc<Shared>,
+    channel: H,
+    tick: Duration,
+    handle: impl Fn(&Shared, T) + Send + 'static,
+) -> JoinHandle<()>
+where
+    H: std::ops::Deref<Target = zenoh::handlers::FifoChannelHandler<T>> + Send + 'static,
+{
+    let s = shared.clone();
+    std::thread::spawn(move || {
+        while !s.stop.load(Ordering::Relaxed) {
+            match channel.recv_timeout(tick) {
+                Ok(Some(item)) => handle(&s, item),
+                Ok(None) => {}
+                Err(_) => break,
+            }
+        }
+    })
+}
+
 /// One process's place in the team: its durable store, a subscriber merging every record
 /// published on the team's keys, a queryable serving every record it holds (store and
 /// forward), a liveliness token, and a thread that every period publishes its digest and
@@ -475,43 +501,29 @@ impl Node {
             .wait()
             .map_err(NetError::zenoh)?;
         let tick = Duration::from_millis(100);
-        let mut threads = Vec::new();
-        let s = shared.clone();
-        threads.push(std::thread::spawn(move || {
-            while !s.stop.load(Ordering::Relaxed) {
-                match records.recv_timeout(tick) {
-                    Ok(Some(sample)) => {
-                        let bytes = sample.payload().to_bytes();
-                        s.receive_record(sample.key_expr().as_str(), &bytes, false);
-                    }
-                    Ok(None) => {}
-                    Err(_) => break,
-                }
-            }
-        }));
-        let s = shared.clone();
-        threads.push(std::thread::spawn(move || {
-            while !s.stop.load(Ordering::Relaxed) {
-                match digests.recv_timeout(tick) {
-                    Ok(Some(sample)) => {
-                        let bytes = sample.payload().to_bytes();
-                        s.receive_digest(sample.key_expr().as_str(), &bytes);
-                    }
-                    Ok(None) => {}
-                    Err(_) => break,
-                }
-            }
-        }));
-        let s = shared.clone();
-        threads.push(std::thread::spawn(move || {
-            while !s.stop.load(Ordering::Relaxed) {
-                match queries.recv_timeout(tick) {
-                    Ok(Some(query)) => s.answer_fetch(&query),
-                    Ok(None) => {}
-                    Err(_) => break,
-                }
-            }
-        }));
+        let mut threads = vec![
+            serve(
+                &shared,
+                records,
+                tick,
+                |s, sample: zenoh::sample::Sample| {
+                    let bytes = sample.payload().to_bytes();
+                    s.receive_record(sample.key_expr().as_str(), &bytes, false);
+                },
+            ),
+            serve(
+                &shared,
+                digests,
+                tick,
+                |s, sample: zenoh::sample::Sample| {
+                    let bytes = sample.payload().to_bytes();
+                    s.receive_digest(sample.key_expr().as_str(), &bytes);
+                },
+            ),
+            serve(&shared, queries, tick, |s, query: zenoh::query::Query| {
+                s.answer_fetch(&query)
+            }),
+        ];
         let s = shared.clone();
         threads.push(std::thread::spawn(move || {
             let mut next = Instant::now();
@@ -568,7 +580,7 @@ impl Node {
             sent_ns,
             scan,
         }
-        .encode();
+        .encode_at(Some(self.shared.opts.list_resolution));
         {
             let mut c = lock(&self.shared.counters);
             c.records_published += 1;

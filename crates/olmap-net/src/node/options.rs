@@ -108,6 +108,9 @@ pub struct NodeOptions {
     pub period: Duration,
     /// Injected faults (default none).
     pub faults: FaultPlan,
+    /// The team's finest resolution, metres (default 0.1): records whose cloud is an
+    /// occupancy list at it are sent as voxel keys (see [`crate::RecordMessage`]).
+    pub list_resolution: f64,
 }
 
 impl NodeOptions {
@@ -122,6 +125,7 @@ impl NodeOptions {
             max_rate: 50,
             period: Duration::from_secs(1),
             faults: FaultPlan::default(),
+            list_resolution: 0.1,
         }
     }
 

@@ -5,11 +5,13 @@
 mod digest;
 mod frame;
 mod keys;
+mod occupancy;
 mod record;
 
 pub use digest::{Digest, FetchRequest, RobotHoldings, MAX_FETCH};
 pub use frame::{open, seal, Kind, ENVELOPE_BYTES, MAGIC, VERSION};
 pub use keys::{check_name, Keys};
+pub use occupancy::{as_keys, occupancy_list, put_keys, MAX_VOXELS};
 pub use record::RecordMessage;
 
 /// A little-endian reader over a message body that never reads past its end.
