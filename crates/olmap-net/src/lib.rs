@@ -59,6 +59,7 @@
 //! per-robot rate are dropped ([`NodeOptions::max_payload`], [`NodeOptions::max_rate`]).
 
 pub mod bench;
+pub mod demo;
 mod durable;
 mod error;
 mod fault;

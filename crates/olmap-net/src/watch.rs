@@ -20,6 +20,9 @@ pub struct WatchOptions {
     pub net: NetOptions,
     /// Stop once a mapper reports at least this many placed scans.
     pub until_placed: Option<u64>,
+    /// Stop once a mapper reports holding at least this many records (with `until_placed`:
+    /// both).
+    pub until_held: Option<u64>,
     /// Stop after this long (then [`WatchSummary::reached`] is false when `until_placed`
     /// was set).
     pub timeout: Option<Duration>,
@@ -30,7 +33,8 @@ pub struct WatchOptions {
 /// What the team looked like when the watch stopped.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct WatchSummary {
-    /// Whether `until_placed` was reached (true when it was not set and time ran out).
+    /// Whether the targets (`until_placed`, `until_held`) were reached (true when none was
+    /// set and time ran out).
     pub reached: bool,
     /// Seconds watched.
     pub elapsed_s: f64,
@@ -99,14 +103,22 @@ pub fn run_watch(
         if changed {
             on_update(&summary);
         }
-        if let Some(n) = opts.until_placed {
-            if summary.nodes.values().any(|s| s.placed >= n) {
-                summary.reached = true;
-                break;
-            }
+        let placed = opts
+            .until_placed
+            .is_none_or(|n| summary.nodes.values().any(|s| s.placed >= n));
+        let held = opts.until_held.is_none_or(|n| {
+            summary
+                .nodes
+                .values()
+                .any(|s| s.role.contains("mapper") && s.records >= n)
+        });
+        let targets = opts.until_placed.is_some() || opts.until_held.is_some();
+        if targets && placed && held {
+            summary.reached = true;
+            break;
         }
         if opts.timeout.is_some_and(|t| start.elapsed() >= t) || stop() {
-            summary.reached = opts.until_placed.is_none();
+            summary.reached = !targets;
             break;
         }
         std::thread::sleep(Duration::from_millis(50));

@@ -187,7 +187,11 @@ pub struct WatchArgs {
     /// Exit (status 0) once a mapper reports at least this many placed scans.
     #[arg(long)]
     pub until_placed: Option<u64>,
-    /// Exit after this many seconds (status 1 if --until-placed was not reached).
+    /// Exit (status 0) once a mapper reports holding at least this many records (with
+    /// --until-placed: once both hold).
+    #[arg(long)]
+    pub until_held: Option<u64>,
+    /// Exit after this many seconds (status 1 if a target was set and not reached).
     #[arg(long)]
     pub timeout: Option<f64>,
     /// Print the final summary as JSON (no live lines).
@@ -418,6 +422,7 @@ pub fn run_watch_cmd(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         &WatchOptions {
             net: args.net.options(),
             until_placed: args.until_placed,
+            until_held: args.until_held,
             timeout,
             max_payload: 1 << 20,
         },
