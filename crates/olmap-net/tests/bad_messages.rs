@@ -42,7 +42,17 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
     )
     .wait()
     .unwrap();
-    std::thread::sleep(Duration::from_millis(500));
+    // The link is up and the mapper subscribed once a good record gets through.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !mapper.holds(3, 0) && Instant::now() < deadline {
+        attacker
+            .put(keys.record(3, 0), good(3, 0, 50))
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(mapper.holds(3, 0), "no link to the mapper");
+    let before = mapper.counters().refused_total();
 
     let mut wrong_version = good(0, 2, 50);
     wrong_version[4] = 99;
@@ -96,13 +106,13 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
         .unwrap();
     assert!(replies.recv().is_err(), "a garbage fetch got a reply");
 
-    let expected_total = bad.len() as u64 + 1;
+    let expected_total = before + bad.len() as u64 + 1;
     let deadline = Instant::now() + Duration::from_secs(20);
     while mapper.counters().refused_total() < expected_total && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
     }
     let c = mapper.counters();
-    assert_eq!(mapper.held(), 0, "a bad payload was stored");
+    assert_eq!(mapper.held(), 1, "a bad payload was stored");
     assert_eq!(c.refused_total(), expected_total, "{:?}", c.refused);
     for (_, _, reason) in &bad {
         assert!(
@@ -117,7 +127,7 @@ fn bad_payloads_are_counted_and_dropped_and_the_mapper_keeps_running() {
         .put(keys.record(2, 0), good(2, 0, 50))
         .wait()
         .unwrap();
-    assert!(mapper.wait_for(1, Duration::from_secs(10)));
+    assert!(mapper.wait_for(2, Duration::from_secs(10)));
     assert!(mapper.holds(2, 0));
     // A different record under a held key is a conflict, never stored.
     let mut other = record(2, 0, 50);
