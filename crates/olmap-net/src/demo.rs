@@ -256,6 +256,20 @@ pub fn run_live_demo(
             cfg.timeout
         )));
     }
+    // Latency figures need a live mapping run over every record: wait for the live map to
+    // place them all (bounded: a scan the team mapper cannot place never comes).
+    progress("waiting for the live map to place every scan");
+    run_watch(
+        &WatchOptions {
+            net: NetOptions::loopback(&team, None, &[port]),
+            until_placed: Some(records),
+            until_held: None,
+            timeout: Some(cfg.timeout.min(Duration::from_secs(1200))),
+            max_payload: 1 << 20,
+        },
+        |_| {},
+        || false,
+    )?;
     progress("stopping: the mapper maps its store and writes its outputs");
     terminate(&mapper);
     if !wait_exit(&mut mapper, cfg.timeout) {

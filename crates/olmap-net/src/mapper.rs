@@ -10,7 +10,7 @@
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -75,6 +75,8 @@ pub struct Mapper {
     latest: Arc<Mutex<Latest>>,
     threads: Vec<JoinHandle<()>>,
     write_lock: Arc<Mutex<()>>,
+    /// Set when the mapper is finishing: no new mapping run starts.
+    finishing: Arc<AtomicBool>,
 }
 
 impl Mapper {
@@ -85,14 +87,16 @@ impl Mapper {
         let opts = Arc::new(opts);
         let latest = Arc::new(Mutex::new(Latest::default()));
         let write_lock = Arc::new(Mutex::new(()));
+        let finishing = Arc::new(AtomicBool::new(false));
         *lock(&node.shared.figures) = Some(MapFigures::default());
         let mut threads = Vec::new();
         {
             let shared = node.shared.clone();
             let latest = latest.clone();
             let opts = opts.clone();
+            let finishing = finishing.clone();
             threads.push(std::thread::spawn(move || {
-                mapping_loop(&shared, &opts, &latest)
+                mapping_loop(&shared, &opts, &latest, &finishing)
             }));
         }
         {
@@ -147,6 +151,7 @@ impl Mapper {
             latest,
             threads,
             write_lock,
+            finishing,
         })
     }
 
@@ -164,6 +169,15 @@ impl Mapper {
     /// output folder (one consistent set: see [`run_team_pipeline`]).
     pub fn write_outputs(&self) -> Result<MapperOutputs> {
         write_outputs(&self.node.shared, &self.opts, &self.write_lock)
+    }
+
+    /// Writes the outputs one last time (no new live mapping run starts meanwhile; one in
+    /// progress finishes), then closes: what a mapper does on SIGINT/SIGTERM.
+    pub fn finish(self) -> Result<MapperOutputs> {
+        self.finishing.store(true, Ordering::Relaxed);
+        let out = self.write_outputs();
+        self.close();
+        out
     }
 
     /// Stops the threads (a mapping run in progress finishes first) and closes the node.
@@ -211,9 +225,14 @@ fn write_outputs(
     })
 }
 
-fn mapping_loop(shared: &Shared, opts: &MapperOptions, latest: &Mutex<Latest>) {
+fn mapping_loop(
+    shared: &Shared,
+    opts: &MapperOptions,
+    latest: &Mutex<Latest>,
+    finishing: &AtomicBool,
+) {
     let mut mapped_generation = 0u64;
-    while !shared.stop.load(Ordering::Relaxed) {
+    while !shared.stop.load(Ordering::Relaxed) && !finishing.load(Ordering::Relaxed) {
         let generation = {
             let g = lock(&shared.generation);
             let g = shared
@@ -227,6 +246,9 @@ fn mapping_loop(shared: &Shared, opts: &MapperOptions, latest: &Mutex<Latest>) {
             continue;
         }
         std::thread::sleep(opts.settle);
+        if finishing.load(Ordering::Relaxed) {
+            break;
+        }
         mapped_generation = *lock(&shared.generation);
         let store = lock(&shared.store).store().clone();
         let started = Instant::now();

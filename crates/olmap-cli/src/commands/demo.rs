@@ -121,8 +121,8 @@ fn run_live(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         f("mean_m"),
         f("median_m"),
         f("max_m"),
-        100.0 * f("share_above_gross"),
-        100.0 * f("share_above_large")
+        100.0 * f("share_above_0.3_m"),
+        100.0 * f("share_above_1_m")
     );
     println!(
         "  mapper's store: {}/{} records; {:.1} KiB per scan sent; {} records recovered by anti-entropy; {} messages dropped by the injected faults",

@@ -322,9 +322,8 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
         let summary = replay_on(mapper.node(), &opts, robot, &scans, stop, &mut on_stop)?;
         serving(&summary);
         wait_until_stopped(stop, linger);
-        let written = mapper.write_outputs()?;
-        let status = mapper.node().status();
-        mapper.close();
+        let written = mapper.finish()?;
+        let status = written.status.clone();
         (summary, status, Some(written))
     } else {
         let (node, summary) = run_robot(&opts, stop, on_stop)?;
@@ -383,14 +382,16 @@ pub fn run_mapper_cmd(args: &MapperArgs) -> anyhow::Result<ExitCode> {
             last_line = Instant::now();
         }
     }
-    let written = if mapper.node().held() > 0 {
-        Some(mapper.write_outputs()?)
+    let (written, status) = if mapper.node().held() > 0 {
+        let w = mapper.finish()?;
+        let status = w.status.clone();
+        (Some(w), status)
     } else {
         eprintln!("{}: no record received: nothing written", args.name);
-        None
+        let status = mapper.node().status();
+        mapper.close();
+        (None, status)
     };
-    let status = mapper.node().status();
-    mapper.close();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&status)?);
     } else {
