@@ -566,6 +566,12 @@ impl Node {
     /// first, then published with blocking congestion control. Returns whether it was new
     /// (a restarted robot re-recording a scan it holds sends nothing).
     pub fn record(&self, name: &str, scan: StoredScan) -> Result<bool> {
+        if scan.seq == u32::MAX {
+            return Err(NetError::InvalidArgument(format!(
+                "scan number {} of robot {} is reserved (the last u32)",
+                scan.seq, scan.robot
+            )));
+        }
         let new = match lock(&self.shared.store).insert(name, &scan)? {
             Ok(new) => new,
             Err(bad) => return Err(NetError::InvalidArgument(bad.to_string())),

@@ -24,10 +24,11 @@ pub struct RobotHoldings {
 }
 
 impl RobotHoldings {
-    /// The holdings of a set of seqs given in ascending order.
+    /// The holdings of a set of seqs given in ascending order (`u32::MAX`, reserved, is
+    /// left out).
     pub fn from_sorted(seqs: impl IntoIterator<Item = u32>) -> RobotHoldings {
         let mut h = RobotHoldings::default();
-        for s in seqs {
+        for s in seqs.into_iter().filter(|&s| s < u32::MAX) {
             if h.ranges.is_empty() && s == h.contiguous {
                 h.contiguous += 1;
             } else if let Some(last) = h.ranges.last_mut().filter(|r| r.1 == s) {

@@ -69,7 +69,8 @@ impl Keys {
         format!("{}/rec/{robot}/*", self.prefix)
     }
 
-    /// The `(robot, seq)` a record key names, if it is one.
+    /// The `(robot, seq)` a record key names, if it is one (seq `u32::MAX` is reserved:
+    /// never a record).
     pub fn parse_record(&self, key: &str) -> Option<(u32, u32)> {
         let rest = key.strip_prefix(&self.prefix)?.strip_prefix("/rec/")?;
         let (robot, seq) = rest.split_once('/')?;
@@ -81,7 +82,9 @@ impl Keys {
         if !canonical(robot) || !canonical(seq) {
             return None;
         }
-        Some((robot.parse().ok()?, seq.parse().ok()?))
+        // The last seq is reserved: digests describe holdings as half-open ranges.
+        let seq: u32 = seq.parse().ok()?;
+        (seq < u32::MAX).then_some((robot.parse().ok()?, seq))
     }
 
     /// A node's digest key; [`Keys::digests`] for all.
@@ -153,6 +156,7 @@ mod tests {
             "olmap/lab-team_1/rec/3/1/2",
             "olmap/other/rec/3/1",
             "olmap/lab-team_1/rec/99999999999/1",
+            "olmap/lab-team_1/rec/1/4294967295",
         ] {
             assert_eq!(k.parse_record(bad), None, "{bad}");
         }
