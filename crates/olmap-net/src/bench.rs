@@ -4,7 +4,6 @@
 
 use std::time::{Duration, Instant};
 
-use olmap::sim::{simulate, OdometryNoise, SimConfig, WorldKind};
 use olmap::team::TeamParams;
 use serde::Serialize;
 
@@ -110,17 +109,7 @@ pub fn run_net_bench(
         ));
     }
     progress("simulating the team");
-    let data = simulate(
-        &SimConfig {
-            world: WorldKind::Lab,
-            seed: opts.seed,
-            robots: opts.robots,
-            stops: opts.stops,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        },
-        |_, _| {},
-    )?;
+    let data = crate::lab::demo_lab(opts.seed, opts.robots, opts.stops)?;
     let raw = data.to_store()?;
     let mut raw_bytes = 0usize;
     let mut list_bytes = 0usize;
@@ -155,10 +144,7 @@ pub fn run_net_bench(
     let port = if opts.port != 0 {
         opts.port
     } else {
-        std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .map_err(|e| NetError::InvalidArgument(format!("no free loopback port: {e}")))?
-            .port()
+        crate::lab::free_loopback_port()?
     };
     let team = format!("bench{}", std::process::id());
     let node_opts = |name: &str, role: &str, listen: Option<u16>, connect: &[u16]| {

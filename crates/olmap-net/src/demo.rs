@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use olmap::sim::{simulate, write_dataset, OdometryNoise, SimConfig, WorldKind};
+use olmap::sim::write_dataset;
 use serde::Serialize;
 
 use crate::error::{NetError, Result};
@@ -143,17 +143,7 @@ pub fn run_live_demo(
         .map_err(|e| NetError::InvalidArgument(format!("{}: {e}", out.display())))?;
     let dataset = out.join("dataset");
     progress("simulating the team");
-    let data = simulate(
-        &SimConfig {
-            world: WorldKind::Lab,
-            seed: cfg.seed,
-            robots: cfg.robots,
-            stops: cfg.scans_per_robot,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        },
-        |_, _| {},
-    )?;
+    let data = crate::lab::demo_lab(cfg.seed, cfg.robots, cfg.scans_per_robot)?;
     write_dataset(&dataset, &data)?;
     for stale in std::fs::read_dir(out).into_iter().flatten().flatten() {
         if stale.path().extension().is_some_and(|e| e == "redb") {
@@ -161,10 +151,7 @@ pub fn run_live_demo(
         }
     }
     let records = (cfg.robots * cfg.scans_per_robot) as u64;
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map_err(|e| NetError::InvalidArgument(format!("no free loopback port: {e}")))?
-        .port();
+    let port = crate::lab::free_loopback_port()?;
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let team = format!("demo{}", std::process::id());
     let p = |x: &Path| x.to_string_lossy().into_owned();

@@ -63,6 +63,7 @@ pub mod demo;
 mod durable;
 mod error;
 mod fault;
+mod lab;
 pub mod mapper;
 mod node;
 pub mod protocol;
