@@ -253,7 +253,7 @@ fn mapping_loop(
         let store = lock(&shared.store).store().clone();
         let started = Instant::now();
         match map_team(&store, &opts.params, |_, _| {}) {
-            Ok(team) => publish_run(shared, latest, team),
+            Ok(team) => publish_run(shared, latest, team, store.len() as u64),
             Err(e) => eprintln!(
                 "{}: mapping {} records failed after {:.1} s: {e}",
                 shared.opts.name,
@@ -265,7 +265,7 @@ fn mapping_loop(
 }
 
 /// Records a completed run: latencies of scans placed for the first time, figures.
-fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap) {
+fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap, mapped_records: u64) {
     let now = now_ns();
     let mut placed: BTreeMap<u32, u64> = BTreeMap::new();
     let mut latest = lock(latest);
@@ -295,6 +295,7 @@ fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap) {
     f.placed = placed;
     f.voxels = team.build.map.len() as u64;
     f.runs += 1;
+    f.mapped_records = mapped_records;
     f.latency_ms = latency_ms;
     latest.map = Some(Arc::new(team));
 }

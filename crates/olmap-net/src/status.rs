@@ -46,8 +46,10 @@ pub struct RobotStatus {
     pub placed: u64,
 }
 
-/// A node's status, published periodically as JSON.
+/// A node's status, published periodically as JSON (fields a sender leaves out read as
+/// their defaults).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NodeStatus {
     /// The node's name.
     pub node: String,
@@ -65,6 +67,9 @@ pub struct NodeStatus {
     pub map_voxels: u64,
     /// Completed mapping runs (mappers).
     pub map_runs: u64,
+    /// Records the last completed mapping run covered (mappers): once it equals `records`,
+    /// the live map reflects every record held.
+    pub mapped_records: u64,
     /// Publish→placement latency of the last placed scans, milliseconds: p50, p95, max
     /// (mappers; over every scan whose publish time is known).
     pub latency_ms: Option<[f64; 3]>,

@@ -23,6 +23,9 @@ pub struct WatchOptions {
     /// Stop once a mapper reports holding at least this many records (with `until_placed`:
     /// both).
     pub until_held: Option<u64>,
+    /// Stop once a mapper's last completed mapping run covered at least this many records
+    /// (with the other targets: once all hold).
+    pub until_mapped: Option<u64>,
     /// Stop after this long (then [`WatchSummary::reached`] is false when `until_placed`
     /// was set).
     pub timeout: Option<Duration>,
@@ -112,8 +115,15 @@ pub fn run_watch(
                 .values()
                 .any(|s| s.role.contains("mapper") && s.records >= n)
         });
-        let targets = opts.until_placed.is_some() || opts.until_held.is_some();
-        if targets && placed && held {
+        let mapped = opts.until_mapped.is_none_or(|n| {
+            summary
+                .nodes
+                .values()
+                .any(|s| s.role.contains("mapper") && s.mapped_records >= n)
+        });
+        let targets =
+            opts.until_placed.is_some() || opts.until_held.is_some() || opts.until_mapped.is_some();
+        if targets && placed && held && mapped {
             summary.reached = true;
             break;
         }

@@ -424,6 +424,7 @@ pub fn run_watch_cmd(args: &WatchArgs) -> anyhow::Result<ExitCode> {
             net: args.net.options(),
             until_placed: args.until_placed,
             until_held: args.until_held,
+            until_mapped: None,
             timeout,
             max_payload: 1 << 20,
         },

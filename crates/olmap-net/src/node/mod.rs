@@ -49,6 +49,8 @@ pub struct MapFigures {
     pub voxels: u64,
     /// Mapping runs completed.
     pub runs: u64,
+    /// Records the last completed run mapped (the store as it was when the run started).
+    pub mapped_records: u64,
     /// Publish→placement latency of placed scans, ms: p50, p95, max.
     pub latency_ms: Option<[f64; 3]>,
 }
@@ -409,6 +411,7 @@ impl Shared {
             placed: figures.as_ref().map_or(0, |f| f.placed.values().sum()),
             map_voxels: figures.as_ref().map_or(0, |f| f.voxels),
             map_runs: figures.as_ref().map_or(0, |f| f.runs),
+            mapped_records: figures.as_ref().map_or(0, |f| f.mapped_records),
             latency_ms: figures.as_ref().and_then(|f| f.latency_ms),
             counters: lock(&self.counters).clone(),
         }
