@@ -118,16 +118,14 @@ impl DurableStore {
         if let Err(e) = trial.set_robot_name(robot, name) {
             return Ok(Err(BadMessage::Body(e.to_string())));
         }
-        // Merge checks identity and conflicts without touching the store on error.
-        let mut merged = match self.store.get(robot, scan.seq) {
-            Some(_) => {
-                return Ok(match self.store.clone_one_checked(scan) {
-                    Ok(()) => Ok(false),
-                    Err(e) => Err(BadMessage::Conflict(e)),
-                })
-            }
-            None => trial,
-        };
+        if self.store.get(robot, scan.seq).is_some() {
+            // Merging checks the record bit for bit against the one held and changes
+            // nothing on a conflict.
+            return Ok(match self.store.merge(&trial) {
+                Ok(_) => Ok(false),
+                Err(e) => Err(BadMessage::Conflict(e.to_string())),
+            });
+        }
         let err = |e: &dyn std::fmt::Display| NetError::Store {
             path: self.path.clone(),
             reason: e.to_string(),
@@ -143,9 +141,7 @@ impl DurableStore {
             names.insert(robot, name).map_err(|e| err(&e))?;
         }
         txn.commit().map_err(|e| err(&e))?;
-        self.store
-            .merge(&std::mem::take(&mut merged))
-            .map_err(|e| err(&e))?;
+        self.store.merge(&trial).map_err(|e| err(&e))?;
         Ok(Ok(true))
     }
 
@@ -172,22 +168,5 @@ impl DurableStore {
     /// `olmap team` reads).
     pub fn export(&self, path: impl AsRef<Path>) -> Result<()> {
         Ok(self.store.write(path)?)
-    }
-}
-
-/// Identity of one record against the one held, as [`ScanStore::merge`] judges it.
-trait CloneOneChecked {
-    fn clone_one_checked(&self, scan: &StoredScan) -> Result<(), String>;
-}
-
-impl CloneOneChecked for ScanStore {
-    fn clone_one_checked(&self, scan: &StoredScan) -> Result<(), String> {
-        let mut one = ScanStore::new();
-        one.insert(scan.clone()).map_err(|e| e.to_string())?;
-        let mut mine = ScanStore::new();
-        if let Some(held) = self.get(scan.robot, scan.seq) {
-            mine.insert(held.clone()).map_err(|e| e.to_string())?;
-        }
-        mine.merge(&one).map(|_| ()).map_err(|e| e.to_string())
     }
 }

@@ -9,7 +9,7 @@
 //! placement; until olmap has one, this is the honest choice.
 
 use std::collections::{BTreeMap, HashSet};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -298,9 +298,4 @@ fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap, mapped_re
     f.mapped_records = mapped_records;
     f.latency_ms = latency_ms;
     latest.map = Some(Arc::new(team));
-}
-
-/// The path of the store file a mapper keeps under `dir` by default.
-pub fn default_store(dir: &Path, node: &str) -> PathBuf {
-    dir.join(format!("{node}.redb"))
 }

@@ -4,7 +4,7 @@
 mod options;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -76,7 +76,6 @@ pub(crate) struct Shared {
     rate: Mutex<HashMap<u32, (u64, u32)>>,
     pub(crate) figures: Mutex<Option<MapFigures>>,
     pub(crate) session: zenoh::Session,
-    fetch_ids: AtomicU64,
 }
 
 impl Shared {
@@ -355,7 +354,6 @@ impl Shared {
                 return;
             }
         }
-        self.fetch_ids.fetch_add(1, Ordering::Relaxed);
         lock(&self.counters).fetches_sent += 1;
         let replies = match self
             .session
@@ -483,7 +481,6 @@ impl Node {
             rate: Mutex::new(HashMap::new()),
             figures: Mutex::new(None),
             session: session.clone(),
-            fetch_ids: AtomicU64::new(0),
             opts,
         });
         let token = session
