@@ -43,6 +43,9 @@ enum Command {
     Voxelize(commands::voxelize::VoxelizeArgs),
     /// Write a map as another map format or as a cloud of voxel centres.
     Export(commands::export::ExportArgs),
+    /// ROS 2 bags (rosbag2 folders, .mcap files): list topics and frames, extract scans with
+    /// their odometry into a folder `olmap map` reads.
+    Bag(commands::bag::BagArgs),
     /// Merge maps of the same resolution (counts add).
     Merge(commands::merge::MergeArgs),
     /// Register a scan onto another scan with no initial guess (multi-resolution search,
@@ -148,6 +151,7 @@ fn main() -> ExitCode {
         Command::Voxelize(a) => commands::voxelize::run(&a),
         Command::Export(a) => commands::export::run(&a),
         Command::Merge(a) => commands::merge::run(&a),
+        Command::Bag(a) => commands::bag::run(&a),
         Command::Mutual(a) => commands::mutual::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Team(a) => commands::team::run(&a),

@@ -86,6 +86,53 @@ fn convert_filters_and_round_trips() {
 }
 
 #[test]
+fn info_and_convert_read_laz() {
+    let Some(d) = data() else { return };
+    let laz = d.join("las/autzen.laz");
+    let v = json(&olmap(&["info", "--json", laz.to_str().unwrap()]));
+    // Data README §7: autzen holds 106 points (the same in the .las).
+    assert_eq!(v[0]["format"], "LAS/LAZ");
+    assert_eq!(v[0]["points"], 106);
+    assert_eq!(v[0]["records"], 106);
+    let origin: Vec<f64> = v[0]["local_origin"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    // The header's bounds: x 635,616-638,865, y 848,978-853,362 (state plane).
+    assert!((635_616.0..638_865.0).contains(&origin[0]), "{origin:?}");
+    assert!((848_977.0..853_363.0).contains(&origin[1]), "{origin:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("autzen.pcd");
+    let r = json(&olmap(&[
+        "convert",
+        "--json",
+        laz.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(r["points_written"], 106);
+    assert_eq!(r["local_origin"], v[0]["local_origin"]);
+    let pcd = olmap::io::read_cloud(&out).unwrap();
+    assert_eq!(pcd.cloud, olmap::io::read_cloud(&laz).unwrap().cloud);
+    // Back to LAS: the input's local origin becomes the offset, the frame is kept.
+    let las = dir.path().join("autzen.las");
+    json(&olmap(&[
+        "convert",
+        "--json",
+        laz.to_str().unwrap(),
+        las.to_str().unwrap(),
+    ]));
+    let back = olmap::io::read_cloud(&las).unwrap();
+    assert_eq!(back.cloud.points(), pcd.cloud.points());
+    assert_eq!(json_origin(&back.report.local_origin), v[0]["local_origin"]);
+}
+
+fn json_origin(o: &Option<[f64; 3]>) -> serde_json::Value {
+    serde_json::to_value(o).unwrap()
+}
+
+#[test]
 fn convert_refuses_bad_arguments_without_writing() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.xyz");

@@ -240,3 +240,55 @@ fn a_mapper_killed_half_way_resumes_and_ends_with_every_record_and_olmap_teams_m
             .unwrap();
     assert_eq!(net["records"].as_u64(), Some(6), "{net}");
 }
+
+/// `olmap robot --map` replaying a ROS 2 bag (data README §6, the three 3DTK scans with
+/// their odometry): every stop is published from the bag, stored and placed.
+#[test]
+fn a_robot_replays_a_ros2_bag_and_maps_it() {
+    let Some(data) = olmap::test_data::dir() else {
+        return;
+    };
+    let bag = data.join("ros2_bags/3dtk_points");
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let out = olmap(&[
+        "robot",
+        "--dataset",
+        bag.to_str().unwrap(),
+        "--robot",
+        "robot0",
+        "--frame",
+        "base_link",
+        "--rate",
+        "20",
+        "--map",
+        "--out",
+        &d("out"),
+        "--store",
+        &d("robot0.redb"),
+        "--linger",
+        "1",
+        "--json",
+        "--team",
+        "bag",
+        "--no-scouting",
+        "--listen",
+        &listen,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["robot"]["published"], 3, "{v}");
+    assert_eq!(v["robot"]["raw_points"], 234_425, "{v}");
+    assert!(Path::new(&d("out")).join("team.olm").is_file());
+    // The written team store holds the three stops with the bag's odometry.
+    let store = olmap::team::ScanStore::read(Path::new(&d("out")).join("team.store")).unwrap();
+    assert_eq!(store.len(), 3);
+    let last = store.get(0, 2).unwrap();
+    assert!((last.time - 1_600_000_021.0).abs() < 1e-6);
+    assert!(last.odometry.is_some());
+}

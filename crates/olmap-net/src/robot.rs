@@ -13,8 +13,11 @@ use crate::node::{Node, NodeOptions};
 /// What a robot node replays and how.
 #[derive(Debug, Clone)]
 pub struct RobotOptions {
-    /// The dataset folder (`olmap simulate` output).
+    /// The dataset folder (`olmap simulate` output), or a ROS 2 bag (rosbag2 folder or
+    /// `.mcap` file) holding this one robot's scans and odometry.
     pub dataset: PathBuf,
+    /// With a bag: which scans, odometry and frame (see [`olmap::io::bag::ExtractOptions`]).
+    pub bag: olmap::io::bag::ExtractOptions,
     /// The robot's name in the dataset, e.g. `robot0` (also the node's name).
     pub robot: String,
     /// Stops replayed per second (default 1).
@@ -63,9 +66,14 @@ pub fn occupancy_record(scan: &StoredScan, resolution: f64) -> Result<StoredScan
     })
 }
 
-/// Reads robot `name`'s records from a dataset folder: its id and its scans in seq order
-/// (a scan file that cannot be read is skipped with a warning on stderr).
-pub fn robot_records(dataset: &std::path::Path, name: &str) -> Result<(u32, Vec<StoredScan>)> {
+/// Reads the robot's records: from a dataset folder, robot `opts.robot`'s id and scans in
+/// seq order (a scan file that cannot be read is skipped with a warning on stderr); from a
+/// ROS 2 bag, [`bag_records`].
+pub fn robot_records(opts: &RobotOptions) -> Result<(u32, Vec<StoredScan>)> {
+    let (dataset, name) = (opts.dataset.as_path(), opts.robot.as_str());
+    if olmap::io::bag::is_bag_path(dataset) {
+        return bag_records(dataset, name, &opts.bag);
+    }
     let data = olmap::sim::read_dataset(dataset)?;
     let (store, skipped) = data.to_store_skipping()?;
     for s in data.skipped.iter().chain(&skipped) {
@@ -90,6 +98,53 @@ pub fn robot_records(dataset: &std::path::Path, name: &str) -> Result<(u32, Vec<
     Ok((robot, store.scans_of(robot).cloned().collect()))
 }
 
+/// One robot's records from a ROS 2 bag: each extracted scan (see
+/// [`olmap::io::bag::extract_scans`]) becomes stop `seq` = its order in the bag, with its
+/// header stamp, its odometry and no sightings. The robot's id is the number its name ends
+/// in (`robot3` → 3), so that the team can tell robots apart; a bag has no ground truth.
+pub fn bag_records(
+    bag: &std::path::Path,
+    name: &str,
+    extract: &olmap::io::bag::ExtractOptions,
+) -> Result<(u32, Vec<StoredScan>)> {
+    let digits: String = name
+        .chars()
+        .rev()
+        .take_while(char::is_ascii_digit)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .rev()
+        .collect();
+    let robot: u32 = digits.parse().map_err(|_| {
+        NetError::InvalidArgument(format!(
+            "--robot '{name}': a robot replayed from a bag needs a name ending in its number \
+             (robot0, robot1, ...), its id in the team"
+        ))
+    })?;
+    let opened = olmap::io::bag::Bag::open(bag).map_err(olmap::Error::from)?;
+    let ex = olmap::io::bag::extract_scans(&opened, extract)?;
+    for s in &ex.skipped {
+        eprintln!("warning: skipped {s}");
+    }
+    if let Some(s) = &ex.stopped_early {
+        eprintln!("warning: reading stopped early: {s}");
+    }
+    let scans = ex
+        .scans
+        .into_iter()
+        .enumerate()
+        .map(|(seq, s)| StoredScan {
+            robot,
+            seq: seq as u32,
+            time: s.stamp.seconds(),
+            odometry: s.odometry,
+            cloud: s.cloud,
+            sightings: Vec::new(),
+        })
+        .collect();
+    Ok((robot, scans))
+}
+
 /// Replays one robot: starts its node, then [`replay_on`] it. Returns with the node still
 /// running (it keeps serving its store: the caller decides how long).
 pub fn run_robot(
@@ -98,7 +153,7 @@ pub fn run_robot(
     mut on_stop: impl FnMut(u32, &RobotSummary),
 ) -> Result<(Node, RobotSummary)> {
     check_rate(opts.rate)?;
-    let (robot, scans) = robot_records(&opts.dataset, &opts.robot)?;
+    let (robot, scans) = robot_records(opts)?;
     let mut node_opts = opts.node.clone();
     node_opts.list_resolution = opts.resolution;
     let node = Node::start(node_opts)?;

@@ -157,3 +157,71 @@ fn baseline_parse_xyz_numbers(bencher: Bencher) {
                 .sum::<f64>()
         });
 }
+
+/// A one-million-point `PointCloud2` message (x y z float32 + 4 bytes padding, the common
+/// driver layout), CDR-encoded.
+fn point_cloud2_message(with_intensity: bool) -> &'static [u8] {
+    use olmap::io::bag::messages::{Header, PointCloud2, PointField};
+    static PLAIN: OnceLock<Vec<u8>> = OnceLock::new();
+    static INTENSITY: OnceLock<Vec<u8>> = OnceLock::new();
+    let cell = if with_intensity { &INTENSITY } else { &PLAIN };
+    cell.get_or_init(|| {
+        let cloud = lidar_like_cloud();
+        let mut data = Vec::with_capacity(16 * POINTS);
+        for (k, p) in cloud.points().iter().enumerate() {
+            for v in [p.x, p.y, p.z, cloud.intensity().map_or(0.0, |i| i[k])] {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let mut names = vec!["x", "y", "z"];
+        if with_intensity {
+            names.push("intensity");
+        }
+        PointCloud2 {
+            header: Header::default(),
+            height: 1,
+            width: POINTS as u32,
+            fields: names
+                .iter()
+                .enumerate()
+                .map(|(k, n)| PointField {
+                    name: (*n).into(),
+                    offset: 4 * k as u32,
+                    datatype: 7,
+                    count: 1,
+                })
+                .collect(),
+            is_bigendian: false,
+            point_step: 16,
+            row_step: 16 * POINTS as u32,
+            data: &data,
+            is_dense: true,
+        }
+        .encode()
+    })
+}
+
+/// `PointCloud2` decoding from memory on one core: the CDR message to an olmap cloud
+/// (`x y z` float32, the fast path; and with `intensity`, the general path).
+#[divan::bench(args = [false, true], sample_count = 10, sample_size = 1)]
+fn point_cloud2_1m(bencher: Bencher, with_intensity: bool) {
+    use olmap::io::bag::{messages::PointCloud2, pointcloud2::decode_points};
+    let bytes = point_cloud2_message(with_intensity);
+    bencher
+        .counter(BytesCount::new(bytes.len()))
+        .counter(ItemsCount::new(POINTS))
+        .bench(|| decode_points(&PointCloud2::decode(bytes).unwrap()).unwrap());
+}
+
+/// `olmap bag extract` of the shared `ros2_bags/3dtk_points` bag (3 scans, 234k points,
+/// odometry, to a temporary folder).
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn bag_extract_3dtk_points(bencher: Bencher) {
+    use olmap::io::bag::{write_extraction, Bag, ExtractOptions};
+    let Some(dir) = olmap::test_data::dir() else {
+        return;
+    };
+    let bag = Bag::open(dir.join("ros2_bags/3dtk_points")).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    bencher.bench(|| write_extraction(&bag, &ExtractOptions::default(), out.path()).unwrap());
+}

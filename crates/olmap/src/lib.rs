@@ -11,7 +11,8 @@
 //!   voxel keys and the pose list file format;
 //! * [`cloud`]: [`cloud::PointCloud`] and its filters;
 //! * [`io`]: readers and writers for the scan formats robots produce (PCD, PLY, XYZ text,
-//!   3DTK, CSV tables, KITTI `.bin`, OctoMap ScanGraph), chosen by file name and content.
+//!   3DTK, CSV tables, KITTI `.bin`, OctoMap ScanGraph, LAS/LAZ), chosen by file name and
+//!   content.
 //!
 //! ## Conventions
 //! Metres, seconds and radians; right-handed frames with x forward, y left, z up; `T_a_b`

@@ -33,10 +33,12 @@ pub enum PcdEncodingArg {
 pub struct ConvertArgs {
     /// Input point-cloud file (format from its name; see `olmap info --help`).
     pub input: PathBuf,
-    /// Output file; its extension picks the format (.pcd .ply .xyz .3d .csv .bin .graph).
-    /// Written atomically: on error no partial file is left.
+    /// Output file; its extension picks the format (.pcd .ply .xyz .3d .csv .bin .graph .las
+    /// .laz). Written atomically: on error no partial file is left. LAS/LAZ output has a 1 mm
+    /// scale and, from a LAS/LAZ input, the input's local origin as its offset (the file
+    /// keeps the input's map frame).
     pub output: PathBuf,
-    /// Read the input as this format (pcd, ply, xyz, 3d, csv, kitti, graph).
+    /// Read the input as this format (pcd, ply, xyz, 3d, csv, kitti, graph, las).
     #[arg(long, value_parser = parse_format)]
     pub in_format: Option<CloudFormat>,
     /// Write the output as this format whatever its extension.
@@ -120,6 +122,7 @@ pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
             } else {
                 PlyEncoding::BinaryLittleEndian
             },
+            ..Default::default()
         },
         min_range: a.min_range,
         max_range: a.max_range,
@@ -137,6 +140,12 @@ pub fn run(a: &ConvertArgs) -> anyhow::Result<ExitCode> {
             "{} ({}, {} points) -> {} ({} points) in {:.2} s",
             r.input, r.input_format, r.points_read, r.output, r.points_written, r.seconds
         );
+        if let Some(o) = r.local_origin {
+            println!(
+                "input local origin ({:.3}, {:.3}, {:.3}): input file coordinates = points + it",
+                o[0], o[1], o[2]
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

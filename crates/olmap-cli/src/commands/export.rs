@@ -15,8 +15,11 @@ pub struct ExportArgs {
     /// Input map (.olm or OctoMap .bt).
     pub map: PathBuf,
     /// Output: a map file (.olm, .bt), a point cloud of voxel centres with counts as intensity
-    /// (.ply .pcd .xyz .csv ...), or a Rerun recording (.rrd: voxels coloured by height, scan
-    /// positions and robot paths from --poses; needs the `rerun` cargo feature).
+    /// (.ply .pcd .xyz .csv ...), an MCAP file for Foxglove and rosbag2 tools (.mcap:
+    /// /olmap/map as sensor_msgs/PointCloud2 in frame `map`, x y z float32 + intensity =
+    /// count; with --poses, /olmap/path as nav_msgs/Path per robot and /tf map -> scan), or a
+    /// Rerun recording (.rrd: voxels coloured by height, scan positions and robot paths from
+    /// --poses; needs the `rerun` cargo feature).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Keep only voxels with at least this count.
@@ -26,8 +29,8 @@ pub struct ExportArgs {
     /// viewers (PLY, PCD keep the colours).
     #[arg(long)]
     pub colour_by_height: bool,
-    /// Rerun output: scan poses (pose list, e.g. team_poses.txt) drawn as labelled
-    /// positions and one path per robot (the name's part before `/`).
+    /// MCAP and Rerun output: scan poses (pose list, e.g. team_poses.txt) written as one path
+    /// per robot (the name's part before `/`) and, in MCAP, as /tf frames.
     #[arg(long)]
     pub poses: Option<PathBuf>,
 }
@@ -36,7 +39,26 @@ pub struct ExportArgs {
 pub fn run(a: &ExportArgs) -> anyhow::Result<ExitCode> {
     olmap::file::check_output(&a.output, "export")?;
     let map = occupancy::read_map(&a.map)?.map.threshold(a.min_count);
-    if super::rrd::is_rrd(&a.output) {
+    let is_mcap = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if is_mcap {
+        let poses = a
+            .poses
+            .as_ref()
+            .map(olmap::geometry::PoseList::read_path)
+            .transpose()?;
+        let cloud = map.to_cloud();
+        olmap::io::bag::write_map_mcap(
+            &a.output,
+            &olmap::io::bag::MapBag {
+                cloud: &cloud,
+                poses: poses.as_ref(),
+                stamp: Default::default(),
+            },
+        )?;
+    } else if super::rrd::is_rrd(&a.output) {
         let poses = a
             .poses
             .as_ref()
@@ -45,7 +67,7 @@ pub fn run(a: &ExportArgs) -> anyhow::Result<ExitCode> {
         super::rrd::write_rrd(&a.output, &map, poses.as_ref())?;
     } else if a.poses.is_some() {
         bail!(
-            "{}: --poses is drawn only into a Rerun recording (.rrd output)",
+            "{}: --poses is written only into an MCAP file (.mcap) or a Rerun recording (.rrd)",
             a.output.display()
         );
     } else if MapFormat::from_path(&a.output).is_some() {

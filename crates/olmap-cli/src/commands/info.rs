@@ -11,11 +11,12 @@ use olmap::occupancy::{describe_file, FileInfo, MapInfo};
 /// Arguments of `olmap info`.
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Point-cloud files (.pcd .ply .xyz .txt .dat .asc .pts .3d .csv .bin .graph, optionally
-    /// .bz2) and map files (.olm, OctoMap .bt). Every file is described even when an earlier one fails.
+    /// Point-cloud files (.pcd .ply .xyz .txt .dat .asc .pts .3d .csv .bin .graph .las .laz,
+    /// optionally .bz2) and map files (.olm, OctoMap .bt). Every file is described even when
+    /// an earlier one fails. LAS/LAZ points are shown relative to their local origin.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// Read every file as this format (pcd, ply, xyz, 3d, csv, kitti, graph) instead of
+    /// Read every file as this format (pcd, ply, xyz, 3d, csv, kitti, graph, las) instead of
     /// guessing it from the file name.
     #[arg(long, value_parser = parse_format)]
     pub format: Option<CloudFormat>,
@@ -30,8 +31,9 @@ pub struct InfoArgs {
 
 /// Parses a format name for clap.
 pub fn parse_format(s: &str) -> Result<CloudFormat, String> {
-    CloudFormat::from_name(s)
-        .ok_or_else(|| format!("unknown format '{s}'; known: pcd, ply, xyz, 3d, csv, kitti, graph"))
+    CloudFormat::from_name(s).ok_or_else(|| {
+        format!("unknown format '{s}'; known: pcd, ply, xyz, 3d, csv, kitti, graph, las, laz")
+    })
 }
 
 /// Runs the command.
@@ -123,6 +125,15 @@ fn cloud_text(c: &CloudInfo) -> String {
         "origin",
         format!("({:.3}, {:.3}, {:.3}) m", origin[0], origin[1], origin[2]),
     );
+    if let Some(o) = c.local_origin {
+        line(
+            "local origin",
+            format!(
+                "({:.3}, {:.3}, {:.3}): file coordinates = points + it",
+                o[0], o[1], o[2]
+            ),
+        );
+    }
     if let Some(b) = &c.bbox {
         bbox_lines(b, &mut line);
         let e = b.extent();

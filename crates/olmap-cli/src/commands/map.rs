@@ -30,7 +30,8 @@ pub enum ModeArg {
 pub struct MapArgs {
     /// Scans (any point-cloud format) or folders of scans (every cloud file in them, by
     /// name; a 3DTK folder holds scanNNN.3d files); or one CARMEN 2D laser log (`.log`,
-    /// `.log.gz`, `.log.bz2`), mapped in x-y-yaw with loop closure (see --odometry-noise).
+    /// `.log.gz`, `.log.bz2`), mapped in x-y-yaw with loop closure (see --odometry-noise);
+    /// or one ROS 2 bag (rosbag2 folder or .mcap file; see --topic, --odom-topic, --frame).
     pub scans: Vec<PathBuf>,
     /// A text file listing scan paths, one per line (relative to the file's folder).
     #[arg(long, value_name = "FILE")]
@@ -124,6 +125,9 @@ pub struct MapArgs {
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
+    /// ROS 2 bags (`olmap map BAG -o map.olm`): which scans and odometry to take.
+    #[command(flatten)]
+    pub bag: crate::commands::bag::BagSelectArgs,
 }
 
 /// The mapping parameters the arguments ask for.
@@ -188,6 +192,11 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
         bail!("--output (-o) is required: the map file (.olm or .bt) to write");
     };
     MapFormat::of_output(output)?;
+    if let [one] = a.scans.as_slice() {
+        if io::bag::is_bag_path(one) {
+            return run_bag(a, one, output);
+        }
+    }
     let job = MapJob {
         scans: io::scan_files(&a.scans, a.list.as_deref())?,
         odometry: match a.odometry.as_deref() {
@@ -212,6 +221,68 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
         bars.update(stage, done, total)
     })?;
     bars.finish();
+    print_run(a, output, &run)
+}
+
+/// `olmap map BAG`: the bag's scans and odometry (see `olmap bag extract`) mapped as scan
+/// files would be.
+fn run_bag(
+    a: &MapArgs,
+    bag: &std::path::Path,
+    output: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
+    if a.list.is_some() || a.odometry.is_some() || a.threedtk_valid || a.first.is_some() {
+        bail!(
+            "{}: --list, --odometry, --3dtk-valid and --first are for scan files; a bag brings \
+             its scans and odometry (choose them with --topic, --odom-topic, --frame)",
+            bag.display()
+        );
+    }
+    let opened = io::bag::Bag::open(bag)?;
+    let ex = io::bag::extract_scans(&opened, &a.bag.options()?)?;
+    for s in &ex.skipped {
+        eprintln!("warning: skipped {s}");
+    }
+    if let Some(s) = &ex.stopped_early {
+        eprintln!("warning: reading stopped early: {s}");
+    }
+    if !a.json {
+        println!(
+            "{}: {} scans from {} [{}], odometry {}",
+            bag.display(),
+            ex.scans.len(),
+            ex.topic,
+            ex.type_name,
+            ex.odometry_source.as_deref().unwrap_or("none")
+        );
+    }
+    let job = MapJob {
+        scans: Vec::new(),
+        odometry: OdometrySource::None,
+        read: ReadOptions::default(),
+        first: None,
+        params: map_params(a)?,
+        output: output.to_path_buf(),
+        poses_out: a.poses_out.clone(),
+        scans_out: a.scans_out.clone(),
+        report: a.report.clone(),
+        graph_out: a.graph_out.clone(),
+    };
+    let mut bars = StageBars::new(a.json);
+    let run = olmap::mapping::run_map_job_on(
+        &job,
+        io::bag::scan_inputs(&ex),
+        &mut |stage, done, total| bars.update(stage, done, total),
+    )?;
+    bars.finish();
+    print_run(a, output, &run)
+}
+
+fn print_run(
+    a: &MapArgs,
+    output: &std::path::Path,
+    run: &olmap::mapping::MapRun,
+) -> anyhow::Result<ExitCode> {
     let (built, report) = (&run.build, &run.report);
     if a.json {
         println!("{}", serde_json::to_string_pretty(report)?);

@@ -2,6 +2,7 @@
 //! arguments).
 
 pub mod align;
+pub mod bag;
 pub mod beacons;
 pub mod bench;
 pub mod convert;

@@ -117,9 +117,14 @@ impl NodeArgs {
 /// Arguments of `olmap robot`.
 #[derive(Args)]
 pub struct RobotArgs {
-    /// The dataset folder (`olmap simulate` output) to replay one robot of.
+    /// The dataset folder (`olmap simulate` output) to replay one robot of, or a ROS 2 bag
+    /// (rosbag2 folder or .mcap) of this robot (scans and odometry: --topic, --odom-topic,
+    /// --frame; put the scans in the robot frame with e.g. --frame base_link).
     #[arg(long)]
     pub dataset: PathBuf,
+    /// With a bag: which scans and odometry.
+    #[command(flatten)]
+    pub bag: crate::commands::bag::BagSelectArgs,
     /// The robot to replay, by its name in the dataset (e.g. `robot0`); also the node's name.
     #[arg(long)]
     pub robot: String,
@@ -275,6 +280,7 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
     }
     let opts = RobotOptions {
         dataset: args.dataset.clone(),
+        bag: args.bag.options()?,
         robot: args.robot.clone(),
         rate: args.rate,
         resolution: args.resolution,
@@ -311,7 +317,7 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
         }
     };
     let (summary, status, written) = if args.map {
-        let (robot, scans) = robot_records(&opts.dataset, &opts.robot)?;
+        let (robot, scans) = robot_records(&opts)?;
         let mapper = Mapper::start(MapperOptions {
             node: opts.node.clone(),
             out: args.out.clone().expect("checked"),

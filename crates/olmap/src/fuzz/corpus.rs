@@ -147,6 +147,14 @@ fn real_files(dir: &Path) -> Result<Vec<Sample>> {
     );
     bt.weight = 0.01;
     out.push(bt);
+    #[cfg(feature = "las")]
+    for rel in ["las/autzen.las", "las/autzen.laz", "las/autzen.copc.laz"] {
+        out.push(Sample::new(
+            rel,
+            Target::Cloud(CloudFormat::Las),
+            read(rel)?,
+        ));
+    }
     Ok(out)
 }
 
@@ -221,6 +229,9 @@ fn own_files() -> Result<Vec<Sample>> {
     let mut out = Vec::new();
     let plain = WriteOptions::default();
     for format in CloudFormat::ALL {
+        if format == CloudFormat::Las {
+            continue; // below: LAS cannot hold the cloud's 3e38 m point
+        }
         out.push(Sample::new(
             format!("olmap {format}"),
             Target::Cloud(format),
@@ -239,6 +250,19 @@ fn own_files() -> Result<Vec<Sample>> {
             format!("olmap PCD {name}"),
             Target::Cloud(CloudFormat::Pcd),
             written(&cloud, CloudFormat::Pcd, &options)?,
+        ));
+    }
+    #[cfg(feature = "las")]
+    for laz in [false, true] {
+        let in_range = cloud.select(|_, p| p.coords.iter().all(|v| v.abs() < 1e6));
+        let options = WriteOptions {
+            laz: Some(laz),
+            ..Default::default()
+        };
+        out.push(Sample::new(
+            if laz { "olmap LAZ" } else { "olmap LAS" },
+            Target::Cloud(CloudFormat::Las),
+            written(&in_range, CloudFormat::Las, &options)?,
         ));
     }
     let ascii_ply = WriteOptions {

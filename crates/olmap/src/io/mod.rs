@@ -9,10 +9,11 @@
 //! | CSV point table | `.csv` | yes | yes | [`csv`] |
 //! | KITTI velodyne | `.bin` | yes | yes | [`kitti`] |
 //! | OctoMap ScanGraph | `.graph` | yes | yes | [`scan_graph`] |
+//! | LAS/LAZ (feature `las`) | `.las .laz` | LAS 1.0-1.4, LAZ, COPC (to a local origin) | LAS 1.2, LAZ | [`las`] |
 //!
 //! Any of them may be bzip2-compressed (`scan.dat.bz2`): the reader decompresses on the fly
 //! and picks the format from the inner extension. Where the extension is unknown, the
-//! content decides for the formats with a signature (PLY, PCD). Poses: [`slam6d`] (3DTK
+//! content decides for the formats with a signature (PLY, PCD, LAS). Poses: [`slam6d`] (3DTK
 //! `.pose` and `.frames`), [`csv::read_pose_table`] (libpointmatcher `carCloudList.csv`) and
 //! [`crate::geometry::PoseList`] (olmap's pose list).
 //!
@@ -20,10 +21,14 @@
 //! [`ReadReport::dropped_non_finite`]. Writers write to a temporary file beside the target
 //! and rename it into place, so a failed write never leaves a half-written file.
 
+#[cfg(feature = "bag")]
+pub mod bag;
 pub mod carmen;
 pub mod csv;
 mod discover;
 pub mod kitti;
+#[cfg(feature = "las")]
+pub mod las;
 pub mod octomap_bt;
 pub mod pcd;
 pub mod ply;
@@ -62,11 +67,15 @@ pub enum CloudFormat {
     KittiBin,
     /// OctoMap's binary ScanGraph (`.graph`): scans with their poses.
     ScanGraph,
+    /// ASPRS LAS and LASzip-compressed LAZ (`.las`, `.laz`), aerial and mobile lidar in a
+    /// map frame; read relative to a local origin ([`ReadReport::local_origin`]). Needs the
+    /// `las` feature.
+    Las,
 }
 
 impl CloudFormat {
     /// Every format, in the order of the module table.
-    pub const ALL: [CloudFormat; 7] = [
+    pub const ALL: [CloudFormat; 8] = [
         CloudFormat::Pcd,
         CloudFormat::Ply,
         CloudFormat::Xyz,
@@ -74,6 +83,7 @@ impl CloudFormat {
         CloudFormat::Csv,
         CloudFormat::KittiBin,
         CloudFormat::ScanGraph,
+        CloudFormat::Las,
     ];
 
     /// A short human name.
@@ -86,6 +96,7 @@ impl CloudFormat {
             CloudFormat::Csv => "CSV point table",
             CloudFormat::KittiBin => "KITTI .bin",
             CloudFormat::ScanGraph => "OctoMap ScanGraph",
+            CloudFormat::Las => "LAS/LAZ",
         }
     }
 
@@ -99,6 +110,7 @@ impl CloudFormat {
             CloudFormat::Csv => &["csv"],
             CloudFormat::KittiBin => &["bin"],
             CloudFormat::ScanGraph => &["graph"],
+            CloudFormat::Las => &["las", "laz"],
         }
     }
 
@@ -110,7 +122,8 @@ impl CloudFormat {
             .find(|f| f.extensions().contains(&ext.as_str()))
     }
 
-    /// Parses a user-facing format name (`pcd`, `ply`, `xyz`, `3d`, `csv`, `kitti`, `graph`).
+    /// Parses a user-facing format name (`pcd`, `ply`, `xyz`, `3d`, `csv`, `kitti`, `graph`,
+    /// `las`, `laz`).
     pub fn from_name(name: &str) -> Option<Self> {
         match name.to_ascii_lowercase().as_str() {
             "kitti" => Some(CloudFormat::KittiBin),
@@ -197,6 +210,11 @@ pub struct ReadReport {
     pub header_lines_skipped: usize,
     /// The compression the file was wrapped in (`bzip2`), if any.
     pub compression: Option<&'static str>,
+    /// LAS/LAZ: the point in the file's frame that the cloud's `(0, 0, 0)` stands for, so
+    /// that file coordinates = cloud points + `local_origin` (subtracted in double precision
+    /// before the points became `f32`; the module `io::las` says how it is chosen). `None`
+    /// for the formats read as they are.
+    pub local_origin: Option<[f64; 3]>,
 }
 
 impl ReadReport {
@@ -212,6 +230,7 @@ impl ReadReport {
             organized: None,
             header_lines_skipped: 0,
             compression: None,
+            local_origin: None,
         }
     }
 }
@@ -256,6 +275,13 @@ pub struct WriteOptions {
     pub pcd_encoding: PcdEncoding,
     /// Encoding of PLY files.
     pub ply_encoding: PlyEncoding,
+    /// LAS/LAZ only: the local origin added back to the points, so that file coordinates =
+    /// points + this (it is also the header's offset); `None` is `(0, 0, 0)`.
+    /// [`convert_cloud_file`] sets it to the input's [`ReadReport::local_origin`] when unset.
+    pub las_local_origin: Option<[f64; 3]>,
+    /// LAS/LAZ only: compress with LASzip (LAZ). `None`: [`write_cloud`] compresses `.laz`
+    /// files, [`write_cloud_to`] writes uncompressed LAS.
+    pub laz: Option<bool>,
 }
 
 /// Reads a point cloud, choosing the format from the file name (and content where needed).
@@ -270,8 +296,20 @@ pub fn read_cloud(path: impl AsRef<Path>) -> Result<LoadedCloud> {
 }
 
 /// Reads a point cloud with options.
+///
+/// With the `bag` feature, a path of the form `BAG#TOPIC@INDEX` that is not an existing
+/// file names one scan message of a ROS 2 bag ([`bag::ScanSpec`]): the cloud in the
+/// message's frame.
 pub fn read_cloud_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedCloud> {
     let path = path.as_ref();
+    #[cfg(feature = "bag")]
+    if let Some(spec) = path
+        .to_str()
+        .filter(|_| !path.exists())
+        .and_then(bag::ScanSpec::parse)
+    {
+        return spec.read().map(|s| s.loaded());
+    }
     let mut reader = open_buffered(path)?;
     let compression = if has_extension(path, "bz2") || starts_with(&mut reader, path, b"BZh")? {
         Some("bzip2")
@@ -289,8 +327,13 @@ pub fn read_cloud_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
                 Some(f) => f,
                 None => detect_format(&inner_name, &mut reader, path)?,
             };
-            read_cloud_from(reader, format, options)
-                .map_err(|e| Error::read(path, format.name(), e))?
+            match format {
+                // LAZ needs to seek: read the file in place rather than through memory.
+                #[cfg(feature = "las")]
+                CloudFormat::Las => las::read_seekable(reader),
+                _ => read_cloud_from(reader, format, options),
+            }
+            .map_err(|e| Error::read(path, format.name(), e))?
         }
         Some(_) => {
             let compressed = reader.get_ref().metadata().map_or(0, |m| m.len());
@@ -504,8 +547,16 @@ pub fn read_cloud_from<R: BufRead>(
         CloudFormat::Csv => csv::read(reader),
         CloudFormat::KittiBin => kitti::read(reader),
         CloudFormat::ScanGraph => scan_graph::read(reader),
+        #[cfg(feature = "las")]
+        CloudFormat::Las => las::read(reader),
+        #[cfg(not(feature = "las"))]
+        CloudFormat::Las => Err(ParseError::Unsupported(NO_LAS.into())),
     }
 }
+
+/// Why LAS/LAZ cannot be read or written without the `las` feature.
+#[cfg(not(feature = "las"))]
+const NO_LAS: &str = "LAS/LAZ: olmap was built without the `las` feature";
 
 /// Writes a point cloud, choosing the format from the file name (or `options.format`).
 /// The file appears complete or not at all.
@@ -528,6 +579,16 @@ pub fn write_cloud(
             })?
         }
     };
+    let laz_by_name;
+    let options = if format == CloudFormat::Las && options.laz.is_none() {
+        laz_by_name = WriteOptions {
+            laz: Some(has_extension(path, "laz")),
+            ..options.clone()
+        };
+        &laz_by_name
+    } else {
+        options
+    };
     write_atomic(path, format.name(), |w| {
         write_cloud_to(w, cloud, format, options)
     })
@@ -548,6 +609,15 @@ pub fn write_cloud_to<W: Write>(
         CloudFormat::Csv => csv::write(w, cloud),
         CloudFormat::KittiBin => kitti::write(w, cloud),
         CloudFormat::ScanGraph => scan_graph::write(w, cloud),
+        #[cfg(feature = "las")]
+        CloudFormat::Las => las::write(
+            w,
+            cloud,
+            options.las_local_origin.unwrap_or([0.0; 3]),
+            options.laz.unwrap_or(false),
+        ),
+        #[cfg(not(feature = "las"))]
+        CloudFormat::Las => Err(std::io::Error::new(std::io::ErrorKind::Unsupported, NO_LAS)),
     }
 }
 
@@ -563,6 +633,9 @@ fn detect_format<R: BufRead>(name: &Path, reader: &mut R, path: &Path) -> Result
     let head = reader.fill_buf().map_err(|e| Error::io(path, e))?;
     let head = &head[..head.len().min(64)];
     // Signatures win over extensions: a PLY saved as .txt is still a PLY.
+    if head.starts_with(b"LASF") {
+        return Ok(CloudFormat::Las);
+    }
     if head.starts_with(b"ply") && head.get(3).is_some_and(|c| *c == b'\n' || *c == b'\r') {
         return Ok(CloudFormat::Ply);
     }

@@ -49,6 +49,10 @@ pub struct CloudInfo {
     pub organized: Option<OrganizedSize>,
     /// The sensor origin, metres.
     pub origin: [f64; 3],
+    /// LAS/LAZ: the point of the file's frame that the cloud's `(0, 0, 0)` stands for (file
+    /// coordinates = the cloud's + this; see [`ReadReport::local_origin`]); `None` for the
+    /// other formats.
+    pub local_origin: Option<[f64; 3]>,
     /// The bounding box, `None` for an empty cloud.
     pub bbox: Option<BoxReport>,
     /// The mean position, `None` for an empty cloud.
@@ -82,6 +86,7 @@ impl CloudInfo {
                 .organized
                 .map(|(width, height)| OrganizedSize { width, height }),
             origin,
+            local_origin: report.local_origin,
             bbox: stats.bbox.as_ref().map(BoxReport::new),
             centroid: stats.centroid.map(|c| [c.x, c.y, c.z]),
             range: stats.range.map(RangeReport::from),
@@ -116,7 +121,9 @@ pub struct ConvertJob {
     pub output: PathBuf,
     /// How to read the input.
     pub read: ReadOptions,
-    /// How to write the output.
+    /// How to write the output. A LAS/LAZ output without a local origin of its own
+    /// ([`WriteOptions::las_local_origin`]) takes the input's ([`ReadReport::local_origin`]),
+    /// so that LAS to LAS keeps the file's frame.
     pub write: WriteOptions,
     /// Keep points at least this far from the sensor origin (with `max_range`: both
     /// unset skips the range band; an unset bound is 0 or infinite).
@@ -152,6 +159,9 @@ pub struct ConvertReport {
     pub dropped_non_finite: u64,
     /// Points dropped on reading by a validity filter.
     pub dropped_invalid: u64,
+    /// LAS/LAZ input: its local origin (input file coordinates = the points + this); an
+    /// output in another format holds the points relative to it.
+    pub local_origin: Option<[f64; 3]>,
     /// Wall time from `start` to the written file, seconds.
     pub seconds: f64,
 }
@@ -262,7 +272,11 @@ pub fn convert_cloud_file(job: &ConvertJob, start: Instant) -> Result<ConvertRep
     if let Some(v) = job.voxel {
         cloud = cloud.voxel_downsample(v)?;
     }
-    write_cloud(&job.output, &cloud, &job.write)?;
+    let mut write = job.write.clone();
+    if write.las_local_origin.is_none() {
+        write.las_local_origin = loaded.report.local_origin;
+    }
+    write_cloud(&job.output, &cloud, &write)?;
     Ok(ConvertReport {
         input: job.input.display().to_string(),
         input_format: loaded.report.format.name().to_string(),
@@ -271,6 +285,7 @@ pub fn convert_cloud_file(job: &ConvertJob, start: Instant) -> Result<ConvertRep
         points_written: cloud.len(),
         dropped_non_finite: loaded.report.dropped_non_finite,
         dropped_invalid: loaded.report.dropped_invalid,
+        local_origin: loaded.report.local_origin,
         seconds: start.elapsed().as_secs_f64(),
     })
 }

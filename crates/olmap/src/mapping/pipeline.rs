@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use super::input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
-use super::{build_map, MapBuild, MapParams, MapReport};
+use super::{build_map, MapBuild, MapParams, MapReport, ScanInput};
 use crate::error::{Error, Result};
 use crate::file::{html_path_beside, write_atomic, OutputSet};
 use crate::geometry::PoseList;
@@ -95,9 +95,28 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     MapFormat::of_output(&job.output)?;
     job.params.validate()?;
     check_unique_names(&job.scans)?;
-    let mut set = declare_outputs(job)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
+    run_map_job_on(job, scans, progress)
+}
+
+/// [`run_map_job`] on scans already in memory (from a ROS 2 bag, say): `job.scans`,
+/// `job.odometry` and `job.read` are not used; every other field is.
+pub fn run_map_job_on(
+    job: &MapJob,
+    scans: Vec<ScanInput>,
+    progress: Progress<'_>,
+) -> Result<MapRun> {
+    MapFormat::of_output(&job.output)?;
+    job.params.validate()?;
+    let mut seen = std::collections::HashSet::new();
+    if let Some(s) = scans.iter().find(|s| !seen.insert(s.name.as_str())) {
+        return Err(Error::InvalidArgument(format!(
+            "two scans are named {}: scan names must be unique",
+            s.name
+        )));
+    }
+    let mut set = declare_outputs(job)?;
     // Every point must have a voxel key at the map's resolution: an error naming the scan
     // and the point, not one deep in the mapper (or a point lost).
     let keys = occupancy::OccupancyList::new(job.params.register.search.resolution)?;

@@ -5,11 +5,15 @@ mod align_exact;
 mod align_synthetic;
 mod audit_readers;
 mod bad_input;
+#[cfg(feature = "bag")]
+mod bag;
 mod beacon;
 mod data_safety;
 mod fuzz;
 mod graph;
 mod grid2d;
+#[cfg(feature = "las")]
+mod las;
 mod layers;
 mod limits;
 mod mapping;
