@@ -172,9 +172,14 @@ where
     report.local_origin = Some(axes.map(|a| a.origin()));
 
     // Checked above: an uncompressed file holds its `n` records; a LAZ file is only known
-    // to hold them when they decode, so reserve no more than one point per byte for it.
+    // to hold them when they decode: reserve for 4 bytes a point (real lidar takes 1-5),
+    // beyond that the vectors grow as points come.
     let format = *header.point_format();
-    let reserve = if format.is_compressed { n.min(size) } else { n };
+    let reserve = if format.is_compressed {
+        n.min(size / 4)
+    } else {
+        n
+    };
     let reserve = usize::try_from(reserve).unwrap_or(usize::MAX);
     let mut points = Vec::with_capacity(reserve);
     let mut intensity = Vec::with_capacity(reserve);
