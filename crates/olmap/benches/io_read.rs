@@ -158,6 +158,7 @@ fn baseline_parse_xyz_numbers(bencher: Bencher) {
         });
 }
 
+#[cfg(feature = "bag")]
 /// A one-million-point `PointCloud2` message (x y z float32 + 4 bytes padding, the common
 /// driver layout), CDR-encoded.
 fn point_cloud2_message(with_intensity: bool) -> &'static [u8] {
@@ -201,6 +202,7 @@ fn point_cloud2_message(with_intensity: bool) -> &'static [u8] {
     })
 }
 
+#[cfg(feature = "bag")]
 /// `PointCloud2` decoding from memory on one core: the CDR message to an olmap cloud
 /// (`x y z` float32, the fast path; and with `intensity`, the general path).
 #[divan::bench(args = [false, true], sample_count = 10, sample_size = 1)]
@@ -213,6 +215,7 @@ fn point_cloud2_1m(bencher: Bencher, with_intensity: bool) {
         .bench(|| decode_points(&PointCloud2::decode(bytes).unwrap()).unwrap());
 }
 
+#[cfg(feature = "bag")]
 /// `olmap bag extract` of the shared `ros2_bags/3dtk_points` bag (3 scans, 234k points,
 /// odometry, to a temporary folder).
 #[divan::bench(sample_count = 5, sample_size = 1)]

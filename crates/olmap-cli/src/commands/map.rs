@@ -271,7 +271,7 @@ fn run_bag(
     let mut bars = StageBars::new(a.json);
     let run = olmap::mapping::run_map_job_on(
         &job,
-        io::bag::scan_inputs(&ex),
+        olmap::mapping::bag_scan_inputs(&ex),
         &mut |stage, done, total| bars.update(stage, done, total),
     )?;
     bars.finish();

@@ -70,6 +70,21 @@ pub fn read_scan_inputs(
     Ok(scans)
 }
 
+/// The scans of a ROS 2 bag extraction as mapping inputs, named as
+/// [`crate::io::bag::write_extraction`] names their files (the message's index on its topic),
+/// with their odometry.
+#[cfg(feature = "bag")]
+pub fn bag_scan_inputs(ex: &crate::io::bag::Extraction) -> Vec<ScanInput> {
+    ex.scans
+        .iter()
+        .map(|s| ScanInput {
+            name: s.name.clone(),
+            cloud: s.cloud.clone(),
+            odometry: s.odometry,
+        })
+        .collect()
+}
+
 /// The index of the scan named `name` (a file stem).
 pub fn scan_index(scans: &[ScanInput], name: &str) -> Result<usize> {
     scans

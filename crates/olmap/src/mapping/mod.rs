@@ -23,6 +23,8 @@ pub use eval::{
 };
 #[cfg(feature = "render")]
 pub use html::write_map_html;
+#[cfg(feature = "bag")]
+pub use input::bag_scan_inputs;
 pub use input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 pub use links::{Placement, ScanLink, TeamLinks};
 pub use pipeline::{run_map_job, run_map_job_on, MapJob, MapRun};

@@ -95,9 +95,11 @@ pub fn run_map_job(job: &MapJob, progress: Progress<'_>) -> Result<MapRun> {
     MapFormat::of_output(&job.output)?;
     job.params.validate()?;
     check_unique_names(&job.scans)?;
+    // The outputs are checked before anything is read or computed.
+    let set = declare_outputs(job)?;
     let odometry = odometry_for(&job.odometry, &job.scans)?;
     let scans = read_scan_inputs(&job.scans, odometry, &job.read, progress)?;
-    run_map_job_on(job, scans, progress)
+    map_and_write(job, set, scans, progress)
 }
 
 /// [`run_map_job`] on scans already in memory (from a ROS 2 bag, say): `job.scans`,
@@ -116,7 +118,17 @@ pub fn run_map_job_on(
             s.name
         )));
     }
-    let mut set = declare_outputs(job)?;
+    let set = declare_outputs(job)?;
+    map_and_write(job, set, scans, progress)
+}
+
+/// Builds the map of `scans` and writes every output of `job` through `set`.
+fn map_and_write(
+    job: &MapJob,
+    mut set: OutputSet,
+    scans: Vec<ScanInput>,
+    progress: Progress<'_>,
+) -> Result<MapRun> {
     // Every point must have a voxel key at the map's resolution: an error naming the scan
     // and the point, not one deep in the mapper (or a point lost).
     let keys = occupancy::OccupancyList::new(job.params.register.search.resolution)?;

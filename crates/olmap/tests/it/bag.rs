@@ -11,8 +11,8 @@ use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
 use olmap::io::bag::messages::{Header, PointCloud2, PointField, Stamp};
 use olmap::io::bag::{
-    bag_info, dynamic, extract_scans, scan_inputs, write_extraction, write_map_mcap, Bag,
-    ExtractOptions, MapBag, ScanSpec,
+    bag_info, dynamic, extract_scans, write_extraction, write_map_mcap, Bag, ExtractOptions,
+    MapBag, ScanSpec,
 };
 
 fn bags() -> Option<PathBuf> {
@@ -247,7 +247,7 @@ fn aligning_and_mapping_from_the_bag_equal_the_same_from_files() {
             .unwrap();
     let from_bag = olmap::mapping::run_map_job_on(
         &job(tmp.path().join("b.olm"), Vec::new()),
-        scan_inputs(&ex),
+        olmap::mapping::bag_scan_inputs(&ex),
         &mut |_, _, _| {},
     )
     .unwrap();

@@ -1,7 +1,7 @@
 //! Scans out of a bag: the scan topic's clouds (`PointCloud2`, or `LaserScan` as planar
 //! clouds), moved into a chosen frame with the bag's transforms, with the odometry at each
 //! scan's stamp — in memory ([`extract_scans`]), as a folder `olmap map` reads
-//! ([`write_extraction`]) or as mapping inputs ([`scan_inputs`]).
+//! ([`write_extraction`]) or as mapping inputs (`mapping::bag_scan_inputs`).
 
 use std::path::{Path, PathBuf};
 
@@ -16,7 +16,6 @@ use super::tf::{TfTree, DEFAULT_TOLERANCE_NS};
 use crate::cloud::{LaserScan, PointCloud};
 use crate::error::Result;
 use crate::geometry::{Pose, PoseList};
-use crate::mapping::ScanInput;
 
 /// Message types olmap reads as scans.
 pub const POINT_CLOUD2: &str = "sensor_msgs/msg/PointCloud2";
@@ -501,18 +500,6 @@ pub fn extract_scans(bag: &Bag, opts: &ExtractOptions) -> Result<Extraction> {
     })?;
     ex.scans = scans;
     Ok(ex)
-}
-
-/// The scans as mapping inputs (named as [`write_extraction`] names their files).
-pub fn scan_inputs(ex: &Extraction) -> Vec<ScanInput> {
-    ex.scans
-        .iter()
-        .map(|s| ScanInput {
-            name: s.name.clone(),
-            cloud: s.cloud.clone(),
-            odometry: s.odometry,
-        })
-        .collect()
 }
 
 /// What [`write_extraction`] wrote.

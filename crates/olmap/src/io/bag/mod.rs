@@ -40,8 +40,8 @@ mod write;
 pub use container::{Bag, BagMessage, SchemaInfo, MAX_RECORD_BYTES};
 pub use error::BagError;
 pub use extract::{
-    extract_scans, extract_scans_with, scan_inputs, write_extraction, BagScan, ExtractOptions,
-    ExtractReport, Extraction, ScanSpec, LASER_SCAN, ODOMETRY, POINT_CLOUD2, TF_MESSAGE,
+    extract_scans, extract_scans_with, write_extraction, BagScan, ExtractOptions, ExtractReport,
+    Extraction, ScanSpec, LASER_SCAN, ODOMETRY, POINT_CLOUD2, TF_MESSAGE,
 };
 pub use info::{bag_info, BagInfo, TopicInfo, MAX_PROBLEMS};
 pub use tf::{interpolate, TfTree, DEFAULT_TOLERANCE_NS};
