@@ -197,6 +197,18 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
             return run_bag(a, one, output);
         }
     }
+    let b = &a.bag;
+    if b.topic.is_some()
+        || b.odom_topic.is_some()
+        || b.frame.is_some()
+        || b.every.is_some()
+        || b.max.is_some()
+    {
+        bail!(
+            "--topic, --odom-topic, --frame, --every and --max are for a ROS 2 bag (one rosbag2 \
+             folder or .mcap file as the input)"
+        );
+    }
     let job = MapJob {
         scans: io::scan_files(&a.scans, a.list.as_deref())?,
         odometry: match a.odometry.as_deref() {

@@ -541,3 +541,33 @@ fn a_written_map_bag_reads_back() {
     assert_eq!(ex.scans[0].cloud.intensity(), cloud.intensity());
     assert_eq!(ex.scans[0].frame, "map");
 }
+
+#[test]
+fn a_broken_odometry_message_is_named_and_the_scans_still_come_out() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut data = Vec::new();
+    for v in [1.0f32, 2.0, 3.0] {
+        data.extend_from_slice(&v.to_le_bytes());
+    }
+    let msgs = vec![cloud_msg(
+        1,
+        1,
+        12,
+        12,
+        &[("x", 0), ("y", 4), ("z", 8)],
+        &data,
+    )];
+    let path = tmp.path().join("odom.mcap");
+    // The extra topic `/other` is the bag's only Odometry topic; its one message is 5 bytes.
+    write_bag(&path, &msgs, Some(("nav_msgs/msg/Odometry", "int32 x\n")));
+    let ex = extract_scans(&Bag::open(&path).unwrap(), &ExtractOptions::default()).unwrap();
+    assert_eq!(ex.scans.len(), 1);
+    assert_eq!(ex.odometry_source.as_deref(), Some("/other"));
+    assert!(ex.scans[0].odometry.is_none());
+    assert_eq!(ex.skipped.len(), 1, "{:?}", ex.skipped);
+    assert!(
+        ex.skipped[0].contains("topic '/other', message 0 (nav_msgs/msg/Odometry)"),
+        "{:?}",
+        ex.skipped
+    );
+}

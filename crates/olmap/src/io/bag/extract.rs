@@ -125,7 +125,8 @@ pub struct Extraction {
     pub type_name: String,
     /// Where the odometry came from (`/odom`, `/tf (odom)`), if anywhere.
     pub odometry_source: Option<String>,
-    /// Scan messages left out, each with its topic, index and reason.
+    /// Messages left out (scans, and transform or odometry messages that did not
+    /// decode), each with its topic, index and reason.
     pub skipped: Vec<String>,
     /// Scan messages passed over by `every` / `max` / `index`.
     pub thinned: u64,
@@ -140,6 +141,8 @@ struct Motion {
     odom: TfTree,
     odom_frame: Option<String>,
     odom_source: Option<String>,
+    /// Transform and odometry messages that did not decode (skipped, named).
+    problems: Vec<String>,
 }
 
 fn read_motion(bag: &Bag, opts: &ExtractOptions) -> Result<(Motion, Option<String>), BagError> {
@@ -149,12 +152,19 @@ fn read_motion(bag: &Bag, opts: &ExtractOptions) -> Result<(Motion, Option<Strin
     let mut static_tf: Vec<(String, String, Pose)> = Vec::new();
     let mut dynamic_tf: Vec<(String, String, i64, Pose)> = Vec::new();
     let mut odom_by_topic: Vec<(String, String, String, i64, Pose)> = Vec::new();
+    let mut problems = Vec::new();
     let result = bag.for_each_message(|m| {
         if !topics.iter().any(|(t, _)| t == m.topic) {
             topics.push((m.topic.to_string(), m.type_name.to_string()));
         }
         if same_type(m.type_name, TF_MESSAGE) {
-            let tfs = decode_tf(m.data).map_err(|e| m.error(e.to_string()))?;
+            let tfs = match decode_tf(m.data) {
+                Ok(t) => t,
+                Err(e) => {
+                    problems.push(m.error(e.to_string()).to_string());
+                    return Ok(true);
+                }
+            };
             for t in tfs {
                 if m.topic == "/tf_static" {
                     static_tf.push((t.header.frame_id, t.child_frame_id, t.transform));
@@ -170,7 +180,13 @@ fn read_motion(bag: &Bag, opts: &ExtractOptions) -> Result<(Motion, Option<Strin
         } else if same_type(m.type_name, ODOMETRY)
             && opts.odom_topic.as_deref().is_none_or(|t| t == m.topic)
         {
-            let o = Odometry::decode(m.data).map_err(|e| m.error(e.to_string()))?;
+            let o = match Odometry::decode(m.data) {
+                Ok(o) => o,
+                Err(e) => {
+                    problems.push(m.error(e.to_string()).to_string());
+                    return Ok(true);
+                }
+            };
             odom_by_topic.push((
                 m.topic.to_string(),
                 o.header.frame_id,
@@ -242,6 +258,7 @@ fn read_motion(bag: &Bag, opts: &ExtractOptions) -> Result<(Motion, Option<Strin
             odom,
             odom_frame,
             odom_source,
+            problems,
         },
         stopped,
     ))
@@ -381,7 +398,7 @@ pub fn extract_scans_with(
         topic: topic.clone(),
         type_name: type_name.clone(),
         odometry_source: motion.odom_source.clone(),
-        skipped: Vec::new(),
+        skipped: std::mem::take(&mut motion.problems),
         thinned: 0,
         stopped_early: stopped_first,
     };
