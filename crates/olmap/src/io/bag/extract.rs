@@ -5,7 +5,6 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::Point3;
 use serde::Serialize;
 
 use super::container::{Bag, BagMessage};
@@ -471,20 +470,7 @@ fn place(
         let frame = frame.trim_start_matches('/');
         if frame != scan.frame {
             let t = motion.tf.lookup(frame, &scan.frame, stamp, tol)?;
-            let points = scan
-                .cloud
-                .points()
-                .iter()
-                .map(|p| t.transform_point_f32(p))
-                .collect();
-            let mut moved = PointCloud::from_points(points);
-            if let Some(i) = scan.cloud.intensity() {
-                moved
-                    .set_intensity(Some(i.to_vec()))
-                    .map_err(|e| e.to_string())?;
-            }
-            moved.set_origin(t.transform_point(&Point3::origin()));
-            scan.cloud = moved;
+            scan.cloud = scan.cloud.transformed(&t);
             scan.frame = frame.to_string();
         }
     }
