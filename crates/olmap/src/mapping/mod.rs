@@ -27,7 +27,7 @@ pub use html::write_map_html;
 pub use input::bag_scan_inputs;
 pub use input::{odometry_for, read_scan_inputs, scan_index, OdometrySource};
 pub use links::{Placement, ScanLink, TeamLinks};
-pub use pipeline::{run_map_job, run_map_job_on, MapJob, MapRun};
+pub use pipeline::{map_scans, run_map_job, run_map_job_on, MapJob, MapRun};
 pub use report::{
     EvalReport, EvalSummaryReport, MapReport, MeanMedianMax, PlacedReport, RejectedReport,
     ScanErrorReport, ShareAbove,

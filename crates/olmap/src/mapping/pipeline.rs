@@ -122,6 +122,33 @@ pub fn run_map_job_on(
     map_and_write(job, set, scans, progress)
 }
 
+/// The mapping step of [`run_map_job`], in memory: checks that every point has a voxel key
+/// at the map's resolution (an error naming the scan and the point, not one deep in the
+/// mapper), builds the map ([`Stage::Map`] progress) and its report, naming the map
+/// `output` in it. For callers that keep the results (the Python package).
+pub fn map_scans(
+    scans: &[ScanInput],
+    params: &MapParams,
+    output: &str,
+    progress: Progress<'_>,
+) -> Result<(MapBuild, MapReport)> {
+    params.validate()?;
+    let keys = occupancy::OccupancyList::new(params.register.search.resolution)?;
+    for s in scans {
+        keys.check_keys(&s.cloud, &crate::geometry::Pose::identity(), &s.name)?;
+    }
+    let build = build_map(scans, params, |done, total| {
+        progress(Stage::Map, done, total)
+    })?;
+    let report = MapReport::new(
+        &build,
+        scans.len(),
+        params.register.search.resolution,
+        output,
+    );
+    Ok((build, report))
+}
+
 /// Builds the map of `scans` and writes every output of `job` through `set`.
 fn map_and_write(
     job: &MapJob,
@@ -129,19 +156,11 @@ fn map_and_write(
     scans: Vec<ScanInput>,
     progress: Progress<'_>,
 ) -> Result<MapRun> {
-    // Every point must have a voxel key at the map's resolution: an error naming the scan
-    // and the point, not one deep in the mapper (or a point lost).
-    let keys = occupancy::OccupancyList::new(job.params.register.search.resolution)?;
-    for s in &scans {
-        keys.check_keys(&s.cloud, &crate::geometry::Pose::identity(), &s.name)?;
-    }
     let mut params = job.params.clone();
     if let Some(name) = &job.first {
         params.first = scan_index(&scans, name)?;
     }
-    let build = build_map(&scans, &params, |done, total| {
-        progress(Stage::Map, done, total)
-    })?;
+    let (build, report) = map_scans(&scans, &params, &job.output.display().to_string(), progress)?;
     occupancy::write_map(set.path(&job.output)?, &build.map)?;
     let mut poses = PoseList::default();
     for p in &build.placed {
@@ -161,12 +180,6 @@ fn map_and_write(
         }
         poses.write_path(set.path(&dir.join("poses.txt"))?)?;
     }
-    let report = MapReport::new(
-        &build,
-        scans.len(),
-        params.register.search.resolution,
-        &job.output.display().to_string(),
-    );
     if let Some(path) = &job.report {
         write_atomic(&set.path(path)?, "JSON report", |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)

@@ -23,7 +23,7 @@ pub use mutual::{
 };
 pub use mutual_report::{observation_of_fix, MutualReport};
 pub(crate) use pipeline::{declare_team_outputs, team_run_into};
-pub use pipeline::{run_team_pipeline, TeamJob, TeamRun};
+pub use pipeline::{run_team_in_memory, run_team_pipeline, TeamJob, TeamResult, TeamRun};
 pub use report::{SoloRun, TeamReport, TEAM_REPORT_FORMAT, TEAM_REPORT_VERSION};
 pub use store::{
     merge_store_files, salvage_store_file, store_info, SalvageReport, ScanStore, StoreDamage,

@@ -94,20 +94,20 @@ pub(crate) fn declare_team_outputs(set: &mut OutputSet, out: &Path, solo: bool) 
     Ok(())
 }
 
-/// Maps every robot alone ([`Stage::SoloMaps`]) and writes `ROBOT.olm` and
-/// `ROBOT_poses.txt` into `dir`.
-fn solo_runs(job: &TeamJob<'_>, dir: &Path, progress: Progress<'_>) -> Result<Vec<SoloRun>> {
-    let total = job.store.len();
-    let runs = map_solo(job.store, job.params, |done, _| {
+/// Maps every robot alone ([`Stage::SoloMaps`]) and compares each with `truth`.
+fn solo_runs(
+    store: &ScanStore,
+    params: &TeamParams,
+    truth: Option<&PoseList>,
+    progress: Progress<'_>,
+) -> Result<Vec<SoloRun>> {
+    let total = store.len();
+    let runs = map_solo(store, params, |done, _| {
         progress(Stage::SoloMaps, done, total)
     })?;
     let mut out = Vec::new();
     for (robot, map) in runs {
-        let name = job.store.robot_name(robot);
-        occupancy::write_map(dir.join(format!("{name}.olm")), &map.build.map)?;
-        let poses = map.poses();
-        poses.write_path(dir.join(format!("{name}_poses.txt")))?;
-        let evaluation = job.truth.map(|t| evaluate(&poses, t)).transpose()?;
+        let evaluation = truth.map(|t| evaluate(&map.poses(), t)).transpose()?;
         out.push(SoloRun {
             robot,
             map,
@@ -115,6 +115,57 @@ fn solo_runs(job: &TeamJob<'_>, dir: &Path, progress: Progress<'_>) -> Result<Ve
         });
     }
     Ok(out)
+}
+
+/// Writes `ROBOT.olm` and `ROBOT_poses.txt` of every solo run into `dir`.
+fn write_solo(store: &ScanStore, runs: &[SoloRun], dir: &Path) -> Result<()> {
+    for run in runs {
+        let name = store.robot_name(run.robot);
+        occupancy::write_map(dir.join(format!("{name}.olm")), &run.map.build.map)?;
+        run.map
+            .poses()
+            .write_path(dir.join(format!("{name}_poses.txt")))?;
+    }
+    Ok(())
+}
+
+/// What [`run_team_in_memory`] computed: [`TeamRun`] without files.
+#[derive(Debug, Clone)]
+pub struct TeamResult {
+    /// The report, as [`run_team_pipeline`] writes it to `report.json`.
+    pub report: TeamReport,
+    /// The joint map.
+    pub team: TeamMap,
+    /// Every robot alone (empty unless asked).
+    pub solo: Vec<SoloRun>,
+}
+
+/// [`run_team_pipeline`] in memory: the team map ([`Stage::TeamMap`]), with `solo` every
+/// robot alone ([`Stage::SoloMaps`]), their errors against `truth` and the report, with no
+/// file written (for callers that keep the results, such as the Python package).
+pub fn run_team_in_memory(
+    store: &ScanStore,
+    truth: Option<&PoseList>,
+    params: &TeamParams,
+    solo: bool,
+    progress: Progress<'_>,
+) -> Result<TeamResult> {
+    let total = store.len();
+    let team = map_team(store, params, |done, _| {
+        progress(Stage::TeamMap, done, total)
+    })?;
+    let team_eval = truth.map(|t| evaluate(&team.poses(), t)).transpose()?;
+    let solo_runs = if solo {
+        solo_runs(store, params, truth, progress)?
+    } else {
+        Vec::new()
+    };
+    let report = TeamReport::new(store, &team, team_eval.as_ref(), &solo_runs, solo);
+    Ok(TeamResult {
+        report,
+        team,
+        solo: solo_runs,
+    })
 }
 
 /// Runs a [`TeamJob`]: the team map ([`Stage::TeamMap`]) written as `OUT/team.olm`,
@@ -138,28 +189,28 @@ pub(crate) fn team_run_into(
     job: &TeamJob<'_>,
     progress: Progress<'_>,
 ) -> Result<TeamRun> {
-    let total = job.store.len();
-    let team = map_team(job.store, job.params, |done, _| {
-        progress(Stage::TeamMap, done, total)
-    })?;
     let staged = |set: &mut OutputSet, name: &str| set.path(&job.out.join(name));
-    write_maps(
-        &staged(set, "team.olm")?,
-        &staged(set, "team.bt")?,
-        &staged(set, "team.ply")?,
-        &team.build.map,
-    )?;
-    let team_poses = team.poses();
-    team_poses.write_path(staged(set, "team_poses.txt")?)?;
-    job.store.write(staged(set, "team.store")?)?;
-    let team_eval = job.truth.map(|t| evaluate(&team_poses, t)).transpose()?;
-    let solo = if job.solo {
-        let dir = staged(set, "solo")?;
-        solo_runs(job, &dir, progress)?
+    // Every output path is staged (checked) before the mapping starts.
+    let paths = [
+        staged(set, "team.olm")?,
+        staged(set, "team.bt")?,
+        staged(set, "team.ply")?,
+        staged(set, "team_poses.txt")?,
+        staged(set, "team.store")?,
+    ];
+    let solo_dir = if job.solo {
+        Some(staged(set, "solo")?)
     } else {
-        Vec::new()
+        None
     };
-    let report = TeamReport::new(job.store, &team, team_eval.as_ref(), &solo, job.solo);
+    let TeamResult { report, team, solo } =
+        run_team_in_memory(job.store, job.truth, job.params, job.solo, progress)?;
+    write_maps(&paths[0], &paths[1], &paths[2], &team.build.map)?;
+    team.poses().write_path(&paths[3])?;
+    job.store.write(&paths[4])?;
+    if let Some(dir) = &solo_dir {
+        write_solo(job.store, &solo, dir)?;
+    }
     write_atomic(&staged(set, "report.json")?, "JSON", |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
     })?;

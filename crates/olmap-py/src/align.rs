@@ -1,0 +1,331 @@
+//! `olmap.align`, `olmap.localize` and their result, `olmap.Alignment`.
+
+use numpy::PyArray2;
+use olmap::align::icp::IcpParams;
+use olmap::align::{
+    self as library, AlignmentReport, Dof, Region, RegisterParams, Registration, SearchMode,
+    SearchParams,
+};
+use olmap::geometry::Pose;
+use pyo3::prelude::*;
+
+use crate::convert::{self, cloud_arg, pose_array, to_python};
+use crate::errors::{value_error, IntoPy};
+use crate::map::PyOccupancyMap;
+use crate::threads::detached;
+
+/// The degrees of freedom named `name` ("xy-yaw", "xyz-yaw", "6dof"), `max_tilt` in degrees.
+pub fn dof(name: &str, max_tilt_deg: f64) -> PyResult<Dof> {
+    match name {
+        "xy-yaw" => Ok(Dof::XyYaw),
+        "xyz-yaw" => Ok(Dof::XyzYaw),
+        "6dof" => {
+            if !(max_tilt_deg.is_finite() && (0.0..=90.0).contains(&max_tilt_deg)) {
+                return Err(value_error(format!(
+                    "max_tilt: expected degrees in [0, 90], got {max_tilt_deg}"
+                )));
+            }
+            Ok(Dof::SixDof {
+                max_tilt: max_tilt_deg.to_radians(),
+            })
+        }
+        other => Err(value_error(format!(
+            "dof: expected \"xy-yaw\", \"xyz-yaw\" or \"6dof\", got {other:?}"
+        ))),
+    }
+}
+
+/// The registration parameters of `align`/`localize`, as the command line builds them.
+#[allow(clippy::too_many_arguments)]
+fn register_params(
+    resolution: f64,
+    levels: usize,
+    dof_name: &str,
+    max_tilt: f64,
+    guess: Option<&Bound<'_, PyAny>>,
+    window: Option<(f64, f64, f64)>,
+    search: &str,
+    refine: bool,
+    max_range: f64,
+) -> PyResult<RegisterParams> {
+    let prior = match guess {
+        Some(g) => convert::pose(g, "guess")?,
+        None => Pose::identity(),
+    };
+    let region = match window {
+        Some((xy, z, yaw)) => {
+            if guess.is_none() {
+                return Err(value_error("window needs guess (the window's centre)"));
+            }
+            Region::Window {
+                xy,
+                z,
+                yaw: yaw.to_radians(),
+            }
+        }
+        None => Region::Global,
+    };
+    let search = match search {
+        "multires" => SearchMode::MultiResolution,
+        "exact" => SearchMode::Exact,
+        other => {
+            return Err(value_error(format!(
+                "search: expected \"multires\" or \"exact\", got {other:?}"
+            )))
+        }
+    };
+    Ok(RegisterParams {
+        search: SearchParams {
+            resolution,
+            levels,
+            dof: dof(dof_name, max_tilt)?,
+            region,
+            prior,
+            max_range,
+            search,
+            exact_max_work: library::EXACT_MAX_WORK,
+            ..Default::default()
+        },
+        refine: refine.then(IcpParams::default),
+        trust: Default::default(),
+    })
+}
+
+/// The result of ``olmap.align`` or ``olmap.localize``: the pose, the verdict and the
+/// evidence.
+///
+/// Attributes:
+///     T_target_source: (4, 4) float64 array mapping source points into the target frame
+///         (``p_target = R p_source + t``; metres).
+///     trusted: whether every trust test passed. An untrusted pose must not be acted on.
+///     doubts: the failed trust tests, in words (empty when trusted).
+///     significance: the search's significance z (best overlap against the distribution of
+///         overlaps over all poses tried; larger is more distinct).
+///     overlap: source voxels that meet occupied target voxels at the search's pose.
+///     overlap_fraction: ``overlap`` over the source voxels searched (0..1).
+///     ambiguity: distinct near-best solutions the search found (1 when unique).
+///     weakly_constrained: axes the refinement could not fix (a corridor's length, a
+///         floor's x, y, yaw), in words.
+///     seconds: wall time of the whole registration.
+///     report: a dict, the same schema as ``olmap align --json``.
+#[pyclass(frozen, module = "olmap", name = "Alignment")]
+pub struct PyAlignment {
+    pose: Pose,
+    trusted: bool,
+    doubts: Vec<String>,
+    significance: f64,
+    overlap: u64,
+    overlap_fraction: f64,
+    ambiguity: usize,
+    weak: Vec<String>,
+    seconds: f64,
+    report: AlignmentReport,
+}
+
+impl PyAlignment {
+    fn new(r: &Registration, source: &str, target: &str) -> Self {
+        PyAlignment {
+            pose: r.pose,
+            trusted: r.trusted,
+            doubts: r.doubts.clone(),
+            significance: r.search.significance,
+            overlap: r.search.overlap,
+            overlap_fraction: r.search.overlap_fraction,
+            ambiguity: r.search.ambiguity,
+            weak: r
+                .refinement
+                .as_ref()
+                .map(|f| f.degeneracy.weak.clone())
+                .unwrap_or_default(),
+            seconds: r.seconds,
+            report: AlignmentReport::new(r, source, target),
+        }
+    }
+}
+
+#[pymethods]
+impl PyAlignment {
+    /// (4, 4) float64 array ``T_target_source``.
+    #[getter(T_target_source)]
+    fn t_target_source<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        pose_array(py, &self.pose)
+    }
+    /// Whether every trust test passed.
+    #[getter]
+    fn trusted(&self) -> bool {
+        self.trusted
+    }
+    /// The failed trust tests, in words.
+    #[getter]
+    fn doubts(&self) -> Vec<String> {
+        self.doubts.clone()
+    }
+    /// The search's significance z.
+    #[getter]
+    fn significance(&self) -> f64 {
+        self.significance
+    }
+    /// Source voxels meeting occupied target voxels at the search's pose.
+    #[getter]
+    fn overlap(&self) -> u64 {
+        self.overlap
+    }
+    /// ``overlap`` over the source voxels searched.
+    #[getter]
+    fn overlap_fraction(&self) -> f64 {
+        self.overlap_fraction
+    }
+    /// Distinct near-best solutions of the search (1: unique).
+    #[getter]
+    fn ambiguity(&self) -> usize {
+        self.ambiguity
+    }
+    /// Axes the refinement left weakly constrained, in words.
+    #[getter]
+    fn weakly_constrained(&self) -> Vec<String> {
+        self.weak.clone()
+    }
+    /// Wall time of the registration, seconds.
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.seconds
+    }
+    /// The report as a dict (the ``olmap align --json`` schema).
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.report)
+    }
+
+    fn __repr__(&self) -> String {
+        let t = self.pose.translation();
+        let (yaw, _, _) = self.pose.yaw_pitch_roll();
+        format!(
+            "Alignment(translation=({:.4}, {:.4}, {:.4}) m, yaw={:.3} deg, trusted={}, \
+             significance={:.1}, overlap_fraction={:.3}{})",
+            t.x,
+            t.y,
+            t.z,
+            yaw.to_degrees(),
+            if self.trusted { "True" } else { "False" },
+            self.significance,
+            self.overlap_fraction,
+            if self.trusted {
+                String::new()
+            } else {
+                format!(", doubts={:?}", self.doubts)
+            }
+        )
+    }
+}
+
+/// Registers ``source`` onto ``target`` with no initial guess: the multi-resolution search
+/// over voxel overlap (thesis §5.3.3), point-to-plane ICP, then the trust tests. Same
+/// inputs, same result as ``olmap align``, bit for bit, whatever the number of threads.
+/// The GIL is released while it runs.
+///
+/// Args:
+///     source: the scan to place, in its sensor frame: a PointCloud or an (N, 3)
+///         array-like of metres (float32 or float64, any memory order).
+///     target: the scan to place it in (same kinds).
+///     resolution: finest voxel edge of the search, metres. Default 0.1.
+///     dof: degrees of freedom searched: ``"xy-yaw"``, ``"xyz-yaw"`` (default; roll and
+///         pitch from the prior: gravity-aligned robots) or ``"6dof"``.
+///     max_tilt: ``"6dof"`` only: largest roll and pitch searched away from the prior,
+///         degrees. Default 15.
+///     guess: a prior pose ``T_target_source`` (4x4). Without ``window`` it only supplies
+///         roll and pitch (and z for ``"xy-yaw"``). Default None (identity).
+///     window: search only ``(xy, z, yaw)`` half-widths around ``guess`` (metres, metres,
+///         degrees) instead of the whole target and every heading. Needs ``guess``.
+///         Default None (global).
+///     search: ``"multires"`` (the thesis' search, default) or ``"exact"`` (branch and
+///         bound: the best pose of the finest lattice, guaranteed, slower).
+///     refine: run the ICP refinement. Default True.
+///     max_range: ignore source points farther than this from the sensor, metres.
+///         Default 30.
+///     threads: worker threads, 0 (default) for one per core; more than the machine's
+///         cores are capped with a RuntimeWarning.
+///     levels: pyramid levels, 0 (default) chooses.
+///
+/// Returns:
+///     Alignment: ``T_target_source``, ``trusted``, ``doubts``, ``significance``,
+///     ``overlap``, ``overlap_fraction``, ``ambiguity``, ``seconds``, ``report``.
+///
+/// Raises:
+///     ValueError: a bad argument, or an empty target or no source point in range.
+///     olmap.TooLargeError: the search would need more memory than olmap allows.
+#[pyfunction]
+#[pyo3(signature = (source, target, resolution=0.1, dof="xyz-yaw", max_tilt=15.0, guess=None,
+                    window=None, search="multires", refine=true, max_range=30.0, threads=0,
+                    levels=0))]
+#[allow(clippy::too_many_arguments)]
+pub fn align(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    resolution: f64,
+    dof: &str,
+    max_tilt: f64,
+    guess: Option<&Bound<'_, PyAny>>,
+    window: Option<(f64, f64, f64)>,
+    search: &str,
+    refine: bool,
+    max_range: f64,
+    threads: usize,
+    levels: usize,
+) -> PyResult<PyAlignment> {
+    let params = register_params(
+        resolution, levels, dof, max_tilt, guess, window, search, refine, max_range,
+    )?;
+    let (s, t) = (cloud_arg(source, "source")?, cloud_arg(target, "target")?);
+    let r = detached(py, threads, || library::register(s.get(), t.get(), &params))?.py_err()?;
+    Ok(PyAlignment::new(&r, &s.name(), &t.name()))
+}
+
+/// Localises a scan in a map: ``align`` against an OccupancyMap (the search runs at the
+/// map's resolution; the score is the plain overlap, as a map stores no free space), then
+/// ICP against the map's voxel centres. Same result as ``olmap localize``.
+///
+/// Args:
+///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.
+///     map: an OccupancyMap.
+///     dof, max_tilt, guess, window, search, refine, max_range, threads, levels: as for
+///         ``align`` (the resolution is the map's).
+///
+/// Returns:
+///     Alignment: ``T_target_source`` is ``T_map_scan``.
+#[pyfunction]
+#[pyo3(signature = (scan, map, dof="xyz-yaw", max_tilt=15.0, guess=None, window=None,
+                    search="multires", refine=true, max_range=30.0, threads=0, levels=0))]
+#[allow(clippy::too_many_arguments)]
+pub fn localize(
+    py: Python<'_>,
+    scan: &Bound<'_, PyAny>,
+    map: PyRef<'_, PyOccupancyMap>,
+    dof: &str,
+    max_tilt: f64,
+    guess: Option<&Bound<'_, PyAny>>,
+    window: Option<(f64, f64, f64)>,
+    search: &str,
+    refine: bool,
+    max_range: f64,
+    threads: usize,
+    levels: usize,
+) -> PyResult<PyAlignment> {
+    let list = map.list().clone();
+    let source_name = map.source_name();
+    drop(map);
+    let params = register_params(
+        list.resolution(),
+        levels,
+        dof,
+        max_tilt,
+        guess,
+        window,
+        search,
+        refine,
+        max_range,
+    )?;
+    let s = cloud_arg(scan, "scan")?;
+    let r = detached(py, threads, || library::localize(s.get(), &list, &params))?.py_err()?;
+    Ok(PyAlignment::new(&r, &s.name(), &source_name))
+}
