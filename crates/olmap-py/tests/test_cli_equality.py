@@ -1,0 +1,124 @@
+"""Python results equal the command line's on the shared real data: poses to 1e-9, the
+same trust verdicts, the same voxels and counts (the package is a thin layer over the same
+library; these catch any parameter or default that differs)."""
+
+import numpy as np
+import pytest
+
+import olmap
+
+POSE_TOL = 1e-9
+
+
+def scan(data, i):
+    return data / "3dtk_dat" / f"scan00{i}.3d"
+
+
+def assert_same_alignment(res, report):
+    assert np.abs(res.T_target_source - np.array(report["T_target_source"])).max() <= POSE_TOL
+    assert res.trusted == report["trusted"]
+    assert res.doubts == report["doubts"]
+    assert res.overlap == report["overlap"]
+    assert res.significance == report["significance"]
+    assert res.ambiguity == report["ambiguity"]
+
+
+def test_align_equals_the_cli_on_the_3dtk_pair(data, cli):
+    s1, s0 = scan(data, 1), scan(data, 0)
+    report = cli("align", "--json", "--3dtk-valid", s1, s0)
+    res = olmap.align(olmap.read_cloud(s1, valid_3dtk=True), olmap.read_cloud(s0, valid_3dtk=True))
+    assert_same_alignment(res, report)
+    # The report is the CLI's schema, field for field (timings aside).
+    assert set(res.report) == set(report)
+    assert res.report["source"] == str(s1)
+    # Data README §1.6/§1.7: scan001 is 1.568 m ahead of scan000, to 5 cm.
+    assert res.trusted
+    assert abs(res.T_target_source[0, 3] - 1.568) < 0.05
+
+
+def test_align_equals_the_cli_on_the_car_pair(data, cli):
+    d = data / "libpointmatcher_car"
+    src, tgt = d / "car_cloud401.csv", d / "car_cloud400.csv"
+    report = cli("align", "--json", src, tgt)
+    res = olmap.align(olmap.read_cloud(src), olmap.read_cloud(tgt))
+    assert_same_alignment(res, report)
+
+
+def test_align_with_a_window_and_the_exact_search_equals_the_cli(data, cli):
+    s1, s0 = scan(data, 1), scan(data, 0)
+    report = cli(
+        "align", "--json", "--3dtk-valid", "--search", "exact",
+        "--guess", "1.5,0,0,0,0,0", "--window", "0.5,0.2,10", s1, s0,
+    )
+    guess = np.eye(4)
+    guess[0, 3] = 1.5
+    res = olmap.align(
+        olmap.read_cloud(s1, valid_3dtk=True), olmap.read_cloud(s0, valid_3dtk=True),
+        search="exact", guess=guess, window=(0.5, 0.2, 10.0),
+    )
+    assert_same_alignment(res, report)
+
+
+def test_voxels_and_localisation_equal_the_cli(data, cli, tmp_path):
+    s0, s1 = scan(data, 0), scan(data, 1)
+    out = tmp_path / "s0.olm"
+    cli("voxelize", "--3dtk-valid", "--resolution", "0.1", s0, "-o", out, parse=False)
+    from_cli = olmap.OccupancyMap.load(out)
+    m = olmap.OccupancyMap(resolution=0.1)
+    m.insert_scan(olmap.read_cloud(s0, valid_3dtk=True), ray_trace=False)
+    c_cli, n_cli = from_cli.voxels()
+    c_py, n_py = m.voxels()
+    assert len(m) == len(from_cli) > 1000
+    assert np.array_equal(c_cli, c_py) and np.array_equal(n_cli, n_py)
+    report = cli("localize", "--json", "--3dtk-valid", s1, out)
+    res = olmap.localize(olmap.read_cloud(s1, valid_3dtk=True), from_cli)
+    assert_same_alignment(res, report)
+    assert abs(res.T_target_source[0, 3] - 1.568) < 0.05
+
+
+def test_ray_traced_map_at_reference_poses_equals_the_cli(data, cli, tmp_path):
+    poses_file = data / "3dtk_dat" / "reference_poses_rh_m.txt"
+    scans = [scan(data, i) for i in range(3)]
+    out = tmp_path / "rt.olm"
+    cli(
+        "voxelize", "--3dtk-valid", "--ray-trace", "--resolution", "0.1", "--max-range", "30",
+        *scans, "--poses", poses_file, "-o", out, parse=False,
+    )
+    # The file names its poses 000, 001, 002: one per scan, in order.
+    poses = list(olmap.read_poses(poses_file).values())
+    assert len(poses) == 3
+    m = olmap.OccupancyMap(resolution=0.1)
+    for s, pose in zip(scans, poses):
+        stats = m.insert_scan(olmap.read_cloud(s, valid_3dtk=True), pose=pose, max_range=30.0)
+        assert stats["rays"] > 10000
+    c_cli, n_cli = olmap.OccupancyMap.load(out).voxels()
+    c_py, n_py = m.voxels()
+    assert np.array_equal(c_cli, c_py) and np.array_equal(n_cli, n_py)
+    # Voxels seen by more than one scan: the counts add.
+    assert n_py.max() >= 2
+
+
+def test_build_map_equals_the_cli(data, cli, tmp_path):
+    folder = data / "3dtk_dat"
+    out = tmp_path / "map.olm"
+    report = cli("map", "--json", folder, "-o", out)
+    scans = [olmap.read_cloud(scan(data, i)) for i in range(3)]
+    build = olmap.build_map(scans, names=[f"scan00{i}" for i in range(3)])
+    assert len(build.poses) == 3
+    by_name = {p["name"]: p for p in report["placed"]}
+    assert {n for n, p in zip(build.names, build.poses) if p is not None} == set(by_name)
+    py_placed = {p["name"]: p for p in build.report["placed"]}
+    for name, pose in zip(build.names, build.poses):
+        if pose is None:
+            continue
+        cli_pose = by_name[name]
+        assert np.abs(pose[:3, 3] - np.array(cli_pose["xyz_m"])).max() <= POSE_TOL, name
+        ypr = np.array(py_placed[name]["yaw_pitch_roll_deg"])
+        assert np.abs(ypr - np.array(cli_pose["yaw_pitch_roll_deg"])).max() <= POSE_TOL, name
+    assert [r["name"] for r in build.report["rejected"]] == [r["name"] for r in report["rejected"]]
+    assert build.report["voxels"] == report["voxels"]
+    c_cli, n_cli = olmap.OccupancyMap.load(out).voxels()
+    c_py, n_py = build.map.voxels()
+    assert np.array_equal(c_cli, c_py) and np.array_equal(n_cli, n_py)
+    # Same schema as `olmap map --report`.
+    assert set(build.report) == set(report)

@@ -1,0 +1,110 @@
+"""Simulation, team mapping, beacons and mutual localisation equal the command line's."""
+
+import math
+
+import numpy as np
+import pytest
+
+import olmap
+from conftest import same_report
+
+
+@pytest.fixture(scope="module")
+def small():
+    # Two robots, three stops each, in the box room: a few seconds.
+    return olmap.simulate(world="box-room", robots=2, scans_per_robot=3, seed=3, scanner="lidar")
+
+
+def test_simulate_is_seeded_and_has_truth(small):
+    again = olmap.simulate(world="box-room", robots=2, scans_per_robot=3, seed=3, scanner="lidar")
+    assert small.robots == ["robot0", "robot1"] and small.world == "box-room"
+    for r in range(2):
+        a, b = small.scans(r), again.scans(r)
+        assert len(a) == 3
+        assert all(np.array_equal(x.points, y.points) for x, y in zip(a, b))
+        assert len(small.truth(r)) == 3
+        assert np.array_equal(small.odometry(r)[0], np.eye(4))
+    assert len(small.scans("robot1")) == 3
+    with pytest.raises(ValueError, match="robot"):
+        small.scans(5)
+
+
+def test_map_team_equals_the_cli_and_the_truth(small, cli, tmp_path):
+    ds_dir = tmp_path / "dataset"
+    small.write(ds_dir)
+    cli_out = tmp_path / "cli"
+    report = cli("team", "--json", ds_dir, "-o", cli_out)
+    res = olmap.map_team(ds_dir)
+    # Same placements, by name, to 1e-9 (the report schema is the CLI's).
+    same_report(res.report, report)
+    cli_poses = olmap.read_poses(cli_out / "team_poses.txt")
+    assert set(res.poses) == set(cli_poses)
+    for name, pose in res.poses.items():
+        # The pose list file is text: compare to its printed precision.
+        assert np.abs(pose - cli_poses[name]).max() < 1e-5, name
+    c_cli, n_cli = olmap.OccupancyMap.load(cli_out / "team.olm").voxels()
+    c_py, n_py = res.map.voxels()
+    assert np.array_equal(c_cli, c_py) and np.array_equal(n_cli, n_py)
+    # Against the truth: the team map of a box room places every scan within 0.3 m (the
+    # gross-error threshold of the thesis' Figure 6.11).
+    team = res.report["evaluation"]["team"]
+    assert team["placed"] == 6 and team["max_m"] < 0.3
+
+
+def test_map_team_in_memory_and_to_a_folder(small, tmp_path):
+    res = olmap.map_team(small, out=tmp_path / "out")
+    assert (tmp_path / "out" / "team.olm").is_file()
+    assert (tmp_path / "out" / "report.json").is_file()
+    assert len(res.poses) == 6
+    mem = olmap.map_team(small)
+    assert set(mem.poses) == set(res.poses)
+    for name in mem.poses:
+        assert np.array_equal(mem.poses[name], res.poses[name])
+
+
+def test_detect_beacons_finds_a_pole():
+    """A pole of radius 0.125 m at (2, 0.5) seen by a scanner with 0.5° steps: ranges from
+    the ray-circle intersection, background wall at 6 m."""
+    cx, cy, radius = 2.0, 0.5, 0.125
+    angles = np.radians(np.arange(-90.0, 90.0 + 1e-9, 0.5))
+    ranges = np.full(angles.size, 6.0)
+    for i, a in enumerate(angles):
+        d = np.array([math.cos(a), math.sin(a)])
+        b = d @ np.array([cx, cy])
+        disc = b * b - (cx * cx + cy * cy - radius * radius)
+        if disc >= 0:
+            ranges[i] = b - math.sqrt(disc)
+    found = olmap.detect_beacons(ranges, angles, radius=radius)
+    near = [f for f in found if math.hypot(f["x"] - cx, f["y"] - cy) < 0.02]
+    assert len(near) == 1, found
+    assert near[0]["returns"] >= 5
+
+
+def test_mutual_localisation_equals_the_cli_and_the_geometry(cli):
+    """Robot B stands at (3, 1) m with heading 40° in A's frame; each beacon is 0.07 m
+    ahead of its scanner (thesis Figure 3.5). The ranges and bearings each robot measures
+    follow; both the library and the CLI must give B's pose back."""
+    d, bx, by, h = 0.07, 3.0, 1.0, math.radians(40.0)
+    rot = lambda t: np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+    b_beacon_in_a = np.array([bx, by]) + rot(h) @ np.array([d, 0.0])
+    a_beacon_in_b = rot(-h) @ (np.array([d, 0.0]) - np.array([bx, by]))
+    a, alpha = float(np.linalg.norm(b_beacon_in_a)), math.degrees(math.atan2(b_beacon_in_a[1], b_beacon_in_a[0]))
+    b, beta = float(np.linalg.norm(a_beacon_in_b)), math.degrees(math.atan2(a_beacon_in_b[1], a_beacon_in_b[0]))
+    report = cli("mutual", "--json", "--a", repr(a), "--alpha", repr(alpha), "--b", repr(b), "--beta", repr(beta))
+    res = olmap.mutual_localisation(a, alpha, b, beta, offset=d)
+    assert res == report
+    assert abs(res["x_m"] - bx) < 1e-9 and abs(res["y_m"] - by) < 1e-9
+    assert abs(res["heading_deg"] - 40.0) < 1e-7
+
+
+def test_build_map_with_odometry_places_simulated_scans_at_the_truth(small):
+    scans, truth = small.scans(0), small.truth(0)
+    build = olmap.build_map(scans, odometry=small.odometry(0), mode="sequential")
+    assert all(p is not None for p in build.poses)
+    first = np.linalg.inv(truth[0])
+    for k, (pose, t) in enumerate(zip(build.poses, truth)):
+        expected = first @ t
+        # The box room is 8 x 6 m with 2 cm range noise: a few centimetres (thesis §5.4's
+        # simulated error at 0.1 m voxels is about a voxel at most).
+        assert np.linalg.norm(pose[:3, 3] - expected[:3, 3]) < 0.1, k
+    assert build.report["scans"] == 3
