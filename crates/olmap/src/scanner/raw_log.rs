@@ -342,16 +342,17 @@ fn sweep_record(fields: &[&str], n: usize, time: f64) -> Result<Sweep, ParseErro
     let count = fields.get(5).and_then(|s| s.parse::<usize>().ok());
     let count = count.ok_or_else(|| ParseError::line(n, "field 6 must be the beam count"))?;
     let rest = &fields[6..];
+    // A count near usize::MAX must not overflow in the doubling: it matches no line.
     let with_int = if rest.len() == count {
         false
-    } else if rest.len() == 2 * count {
+    } else if Some(rest.len()) == count.checked_mul(2) {
         true
     } else {
         return Err(ParseError::line(
             n,
             format!(
                 "a sweep of {count} beams needs {count} ranges or {} ranges and intensities, found {} values",
-                2 * count,
+                count.saturating_mul(2),
                 rest.len()
             ),
         ));

@@ -473,6 +473,8 @@ fn mirror_log_round_trip_is_exact() {
     corrupt(first_sweep, &sweep_bad);
     let truncated = lines[first_sweep].rsplit_once(' ').unwrap().0.to_string();
     corrupt(first_sweep, &truncated);
+    // A beam count whose double overflows (a crafted line once panicked here).
+    corrupt(first_sweep, "S 0.5 0.1 0 0.01 18446744073709551615 1 2");
     corrupt(first_event, "E 0.5 tock");
     corrupt(first_event, "Q 0.5 tick");
     corrupt(first_sweep + 3, "E -1 tick"); // out of time order
