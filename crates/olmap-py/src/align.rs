@@ -111,13 +111,29 @@ fn register_params(
 #[pyclass(frozen, module = "olmap", name = "Alignment")]
 pub struct PyAlignment {
     pose: Pose,
+    /// Whether every trust test passed.
+    #[pyo3(get)]
     trusted: bool,
+    /// The failed trust tests, in words.
+    #[pyo3(get)]
     doubts: Vec<String>,
+    /// The search's significance z.
+    #[pyo3(get)]
     significance: f64,
+    /// Source voxels meeting occupied target voxels at the search's pose.
+    #[pyo3(get)]
     overlap: u64,
+    /// ``overlap`` over the source voxels searched.
+    #[pyo3(get)]
     overlap_fraction: f64,
+    /// Distinct near-best solutions of the search (1: unique).
+    #[pyo3(get)]
     ambiguity: usize,
-    weak: Vec<String>,
+    /// Axes the refinement left weakly constrained, in words.
+    #[pyo3(get)]
+    weakly_constrained: Vec<String>,
+    /// Wall time of the registration, seconds.
+    #[pyo3(get)]
     seconds: f64,
     report: AlignmentReport,
 }
@@ -132,7 +148,7 @@ impl PyAlignment {
             overlap: r.search.overlap,
             overlap_fraction: r.search.overlap_fraction,
             ambiguity: r.search.ambiguity,
-            weak: r
+            weakly_constrained: r
                 .refinement
                 .as_ref()
                 .map(|f| f.degeneracy.weak.clone())
@@ -149,46 +165,6 @@ impl PyAlignment {
     #[getter(T_target_source)]
     fn t_target_source<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         pose_array(py, &self.pose)
-    }
-    /// Whether every trust test passed.
-    #[getter]
-    fn trusted(&self) -> bool {
-        self.trusted
-    }
-    /// The failed trust tests, in words.
-    #[getter]
-    fn doubts(&self) -> Vec<String> {
-        self.doubts.clone()
-    }
-    /// The search's significance z.
-    #[getter]
-    fn significance(&self) -> f64 {
-        self.significance
-    }
-    /// Source voxels meeting occupied target voxels at the search's pose.
-    #[getter]
-    fn overlap(&self) -> u64 {
-        self.overlap
-    }
-    /// ``overlap`` over the source voxels searched.
-    #[getter]
-    fn overlap_fraction(&self) -> f64 {
-        self.overlap_fraction
-    }
-    /// Distinct near-best solutions of the search (1: unique).
-    #[getter]
-    fn ambiguity(&self) -> usize {
-        self.ambiguity
-    }
-    /// Axes the refinement left weakly constrained, in words.
-    #[getter]
-    fn weakly_constrained(&self) -> Vec<String> {
-        self.weak.clone()
-    }
-    /// Wall time of the registration, seconds.
-    #[getter]
-    fn seconds(&self) -> f64 {
-        self.seconds
     }
     /// The report as a dict (the ``olmap align --json`` schema).
     #[getter]

@@ -43,6 +43,19 @@ def _find_cli():
 
 
 @pytest.fixture(scope="session")
+def pair(data):
+    """scan001 and scan000 of the 3DTK example (valid returns), the real pair whose
+    alignment the data README gives: scan001 is 1.568 m ahead."""
+    import olmap
+
+    d = data / "3dtk_dat"
+    return (
+        olmap.read_cloud(d / "scan001.3d", valid_3dtk=True),
+        olmap.read_cloud(d / "scan000.3d", valid_3dtk=True),
+    )
+
+
+@pytest.fixture(scope="session")
 def cli():
     binary = _find_cli()
     if binary is None or not binary.is_file():

@@ -8,15 +8,6 @@ import olmap
 
 
 @pytest.fixture(scope="module")
-def pair(data):
-    d = data / "3dtk_dat"
-    return (
-        olmap.read_cloud(d / "scan001.3d", valid_3dtk=True),
-        olmap.read_cloud(d / "scan000.3d", valid_3dtk=True),
-    )
-
-
-@pytest.fixture(scope="module")
 def reference(pair):
     return olmap.align(*pair)
 

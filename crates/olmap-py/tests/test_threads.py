@@ -10,15 +10,6 @@ import pytest
 import olmap
 
 
-@pytest.fixture(scope="module")
-def pair(data):
-    d = data / "3dtk_dat"
-    return (
-        olmap.read_cloud(d / "scan001.3d", valid_3dtk=True),
-        olmap.read_cloud(d / "scan000.3d", valid_3dtk=True),
-    )
-
-
 def test_python_runs_while_an_alignment_runs(pair):
     """Proof without timing: a Python loop in the main thread makes progress while another
     thread is inside olmap.align. With the GIL held, the loop could not run at all until
