@@ -14,7 +14,7 @@ use crate::align::dof as parse_dof;
 use crate::convert::{self, cloud_arg, pose_array, to_python};
 use crate::errors::{value_error, IntoPy};
 use crate::map::PyOccupancyMap;
-use crate::threads::detached;
+use crate::threads::{detached, PyProgress};
 
 /// The result of ``olmap.build_map``.
 ///
@@ -97,6 +97,9 @@ impl PyMapBuild {
 ///     graph: refine the poses with a pose graph of pairwise registrations and odometry
 ///         (default False).
 ///     threads: worker threads, 0 (default) for one per core.
+///     progress: None (default), or a callable ``progress(stage, done, total)`` called as
+///         scans are placed (stage ``"map"``), with the GIL held for the call; an exception
+///         it raises is raised when the mapping ends.
 ///
 /// Returns:
 ///     MapBuild: ``poses``, ``names``, ``map``, ``report``.
@@ -106,7 +109,8 @@ impl PyMapBuild {
 #[pyfunction]
 #[pyo3(signature = (scans, odometry=None, resolution=0.1, mode="batch", dof="xyz-yaw",
                     max_tilt=15.0, max_range=30.0, names=None, first=0, bucket_radius=0.0,
-                    min_count=1, register_band=None, graph=false, threads=0))]
+                    min_count=1, register_band=None, graph=false, threads=0,
+                    progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn build_map(
     py: Python<'_>,
@@ -124,7 +128,9 @@ pub fn build_map(
     register_band: Option<(f64, f64)>,
     graph: bool,
     threads: usize,
+    progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyMapBuild> {
+    let mut progress = PyProgress::new(progress)?;
     let mut inputs = Vec::new();
     for (i, item) in scans.try_iter()?.enumerate() {
         let cloud = cloud_arg(&item?, &format!("scans[{i}]"))?.into_owned();
@@ -205,9 +211,12 @@ pub fn build_map(
         ..Default::default()
     };
     let (build, report) = detached(py, threads, || {
-        olmap::mapping::map_scans(&inputs, &params, "<memory>", &mut |_, _, _| {})
+        olmap::mapping::map_scans(&inputs, &params, "<memory>", &mut |stage, done, total| {
+            progress.report(stage, done, total)
+        })
     })?
     .py_err()?;
+    progress.finish()?;
     let mut poses = vec![None; inputs.len()];
     for p in &build.placed {
         poses[p.index] = Some(p.pose);

@@ -21,7 +21,7 @@ use crate::cloud::PyPointCloud;
 use crate::convert::{pose_array, to_python};
 use crate::errors::{value_error, IntoPy};
 use crate::map::PyOccupancyMap;
-use crate::threads::detached;
+use crate::threads::{detached, PyProgress};
 
 /// A simulated multi-robot run with ground truth (from ``olmap.simulate``).
 ///
@@ -159,6 +159,8 @@ fn choice<T: Copy>(what: &str, value: &str, options: &[(&str, T)]) -> PyResult<T
 ///         ``"mirror-standard"`` or ``"lidar"`` (a multi-beam spinning lidar).
 ///     range_noise: standard deviation of the range noise, metres (default 0.02).
 ///     beacon: ``"above"`` (default) or ``"front"`` (a beacon 0.1 m ahead, 180° field of view).
+///     progress: None (default), or a callable ``progress("simulate", done, total)`` called
+///         as scans are simulated, with the GIL held for the call.
 ///
 /// Returns:
 ///     SimDataset.
@@ -167,7 +169,7 @@ fn choice<T: Copy>(what: &str, value: &str, options: &[(&str, T)]) -> PyResult<T
 ///     ValueError: a bad argument. olmap.TooLargeError: more than olmap's memory limit.
 #[pyfunction]
 #[pyo3(signature = (world="lab", robots=4, scans_per_robot=20, seed=1, odometry="typical",
-                    scanner="mirror", range_noise=0.02, beacon="above"))]
+                    scanner="mirror", range_noise=0.02, beacon="above", progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate(
     py: Python<'_>,
@@ -179,7 +181,9 @@ pub fn simulate(
     scanner: &str,
     range_noise: f64,
     beacon: &str,
+    progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PySimDataset> {
+    let mut reports = PyProgress::new(progress)?;
     let worlds: Vec<(&str, WorldKind)> = WorldKind::ALL.iter().map(|w| (w.name(), *w)).collect();
     let world = choice("world", world, &worlds)?;
     if !(range_noise.is_finite() && range_noise >= 0.0) {
@@ -233,8 +237,13 @@ pub fn simulate(
         config.sighting.fov = 180f64.to_radians();
     }
     let data = py
-        .detach(|| library_simulate(&config, |_, _| {}))
+        .detach(|| {
+            library_simulate(&config, |done, total| {
+                reports.report(olmap::progress::Stage::Simulate, done, total)
+            })
+        })
         .py_err()?;
+    reports.finish()?;
     Ok(PySimDataset { data })
 }
 
@@ -296,11 +305,15 @@ impl PyTeamResult {
 ///     out: a folder to write the run's files into as ``olmap team -o`` does (maps, poses,
 ///         store, report.json); default None writes nothing.
 ///     threads: worker threads, 0 (default) for one per core.
+///     progress: None (default), or a callable ``progress(stage, done, total)`` called as
+///         scans are placed (stages ``"team map"``, ``"solo maps"``), with the GIL held for
+///         the call; an exception it raises is raised when the mapping ends.
 ///
 /// Returns:
 ///     TeamResult: ``poses``, ``map``, ``report``.
 #[pyfunction]
-#[pyo3(signature = (dataset, solo=false, clearing=true, graph=false, out=None, threads=0))]
+#[pyo3(signature = (dataset, solo=false, clearing=true, graph=false, out=None, threads=0,
+                    progress=None))]
 pub fn map_team(
     py: Python<'_>,
     dataset: &Bound<'_, PyAny>,
@@ -309,7 +322,9 @@ pub fn map_team(
     graph: bool,
     out: Option<PathBuf>,
     threads: usize,
+    progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyTeamResult> {
+    let mut reports = PyProgress::new(progress)?;
     let (store, truth): (ScanStore, Option<PoseList>) =
         if let Ok(ds) = dataset.extract::<PyRef<'_, PySimDataset>>() {
             let data = &ds.data;
@@ -338,7 +353,9 @@ pub fn map_team(
         params.map.graph = Some(GraphRefineParams::default());
     }
     let (report, team) = detached(py, threads, || -> olmap::Result<_> {
-        let progress = &mut |_, _, _| {};
+        let progress = &mut |stage: olmap::progress::Stage, done: usize, total: usize| {
+            reports.report(stage, done, total)
+        };
         match &out {
             Some(dir) => {
                 let run = run_team_pipeline(
@@ -360,6 +377,7 @@ pub fn map_team(
         }
     })?
     .py_err()?;
+    reports.finish()?;
     Ok(PyTeamResult {
         poses: team.poses(),
         map: Py::new(py, PyOccupancyMap::from_list(team.build.map))?,

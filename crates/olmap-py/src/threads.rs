@@ -30,3 +30,49 @@ where
         })?;
     Ok(py.detach(|| pool.install(work)))
 }
+
+/// A Python progress callback for the library's long pipelines: `progress(stage, done,
+/// total)` (stage a label such as `"map"`), called from the worker with the GIL taken back
+/// for the call. An exception it raises is kept and raised once the work ends; the work
+/// itself runs to its end (the library's pipelines cannot be cancelled midway).
+pub struct PyProgress {
+    callback: Option<Py<PyAny>>,
+    error: Option<PyErr>,
+}
+
+impl PyProgress {
+    /// The callback `progress` (None: no reports); a value that is not callable is a
+    /// `TypeError`.
+    pub fn new(progress: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let callback = match progress {
+            Some(p) if !p.is_none() => {
+                if !p.is_callable() {
+                    return Err(pyo3::exceptions::PyTypeError::new_err(
+                        "progress: expected a callable progress(stage, done, total) or None",
+                    ));
+                }
+                Some(p.clone().unbind())
+            }
+            _ => None,
+        };
+        Ok(PyProgress {
+            callback,
+            error: None,
+        })
+    }
+
+    /// Reports `done` of `total` in `stage`.
+    pub fn report(&mut self, stage: olmap::progress::Stage, done: usize, total: usize) {
+        let (Some(cb), None) = (&self.callback, &self.error) else {
+            return;
+        };
+        if let Err(e) = Python::attach(|py| cb.call1(py, (stage.label(), done, total)).map(drop)) {
+            self.error = Some(e);
+        }
+    }
+
+    /// The callback's exception, if it raised one.
+    pub fn finish(self) -> PyResult<()> {
+        self.error.map_or(Ok(()), Err)
+    }
+}

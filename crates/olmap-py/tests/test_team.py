@@ -108,3 +108,26 @@ def test_build_map_with_odometry_places_simulated_scans_at_the_truth(small):
         # simulated error at 0.1 m voxels is about a voxel at most).
         assert np.linalg.norm(pose[:3, 3] - expected[:3, 3]) < 0.1, k
     assert build.report["scans"] == 3
+
+
+def test_progress_callbacks_report_and_their_errors_surface(small):
+    calls = []
+    olmap.build_map(small.scans(0), progress=lambda *a: calls.append(a))
+    assert calls and all(stage == "map" for stage, _, _ in calls)
+    assert calls[-1][1] == calls[-1][2] == 3
+    assert [done for _, done, _ in calls] == sorted(done for _, done, _ in calls)
+    team_calls = []
+    olmap.map_team(small, progress=lambda *a: team_calls.append(a))
+    assert team_calls[-1] == ("team map", 6, 6)
+    sim_calls = []
+    olmap.simulate(world="box-room", robots=1, scans_per_robot=2, scanner="lidar",
+                   progress=lambda *a: sim_calls.append(a))
+    assert sim_calls[-1] == ("simulate", 2, 2)
+
+    def boom(*_):
+        raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        olmap.build_map(small.scans(0), progress=boom)
+    with pytest.raises(TypeError, match="progress"):
+        olmap.build_map(small.scans(0), progress=3)

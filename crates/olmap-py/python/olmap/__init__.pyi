@@ -1,7 +1,7 @@
 """Type stubs of the olmap Python package (see ``help(olmap)``)."""
 
 import os
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -9,6 +9,7 @@ import numpy.typing as npt
 __version__: str
 
 PathLike = Union[str, "os.PathLike[str]"]
+Progress = Optional[Callable[[str, int, int], Any]]  # progress(stage, done, total)
 ArrayLike = npt.ArrayLike
 Pose = npt.ArrayLike  # a 4x4 homogeneous transform
 Points = Union["PointCloud", npt.ArrayLike]  # PointCloud or (N, 3) metres
@@ -180,6 +181,7 @@ def build_map(
     register_band: Optional[Tuple[float, float]] = None,
     graph: bool = False,
     threads: int = 0,
+    progress: Progress = None,
 ) -> MapBuild: ...
 def simulate(
     world: str = "lab",
@@ -190,6 +192,7 @@ def simulate(
     scanner: str = "mirror",
     range_noise: float = 0.02,
     beacon: str = "above",
+    progress: Progress = None,
 ) -> SimDataset: ...
 def map_team(
     dataset: Union[SimDataset, PathLike],
@@ -198,6 +201,7 @@ def map_team(
     graph: bool = False,
     out: Optional[PathLike] = None,
     threads: int = 0,
+    progress: Progress = None,
 ) -> TeamResult: ...
 def detect_beacons(
     ranges: npt.ArrayLike,
