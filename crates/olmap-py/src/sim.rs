@@ -314,6 +314,7 @@ impl PyTeamResult {
 #[pyfunction]
 #[pyo3(signature = (dataset, solo=false, clearing=true, graph=false, out=None, threads=0,
                     progress=None))]
+#[allow(clippy::too_many_arguments)]
 pub fn map_team(
     py: Python<'_>,
     dataset: &Bound<'_, PyAny>,
