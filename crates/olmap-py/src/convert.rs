@@ -12,7 +12,7 @@ use olmap::geometry::Pose;
 use pyo3::prelude::*;
 
 use crate::cloud::PyPointCloud;
-use crate::errors::{value_error, IntoPy};
+use crate::errors::value_error;
 
 /// How far from a rotation a 4x4 pose's upper-left block may be (orthonormality error).
 pub const POSE_TOLERANCE: f64 = 1e-6;
@@ -151,9 +151,7 @@ pub fn pose(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Pose> {
         )));
     }
     let m = Matrix4::from_fn(|r, c| v[[r, c]]);
-    Pose::from_matrix4(&m, POSE_TOLERANCE)
-        .py_err()
-        .map_err(|e| value_error(format!("{what}: {e}")))
+    Pose::from_matrix4(&m, POSE_TOLERANCE).map_err(|e| value_error(format!("{what}: {e}")))
 }
 
 /// A pose as a 4x4 float64 array.
