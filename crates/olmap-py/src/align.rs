@@ -19,16 +19,10 @@ pub fn dof(name: &str, max_tilt_deg: f64) -> PyResult<Dof> {
     match name {
         "xy-yaw" => Ok(Dof::XyYaw),
         "xyz-yaw" => Ok(Dof::XyzYaw),
-        "6dof" => {
-            if !(max_tilt_deg.is_finite() && (0.0..=90.0).contains(&max_tilt_deg)) {
-                return Err(value_error(format!(
-                    "max_tilt: expected degrees in [0, 90], got {max_tilt_deg}"
-                )));
-            }
-            Ok(Dof::SixDof {
-                max_tilt: max_tilt_deg.to_radians(),
-            })
-        }
+        // The library checks the range (SearchParams::validate).
+        "6dof" => Ok(Dof::SixDof {
+            max_tilt: max_tilt_deg.to_radians(),
+        }),
         other => Err(value_error(format!(
             "dof: expected \"xy-yaw\", \"xyz-yaw\" or \"6dof\", got {other:?}"
         ))),
@@ -43,7 +37,7 @@ fn register_params(
     dof_name: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
-    window: Option<(f64, f64, f64)>,
+    window: Option<Vec<f64>>,
     search: &str,
     refine: bool,
     max_range: f64,
@@ -53,7 +47,13 @@ fn register_params(
         None => Pose::identity(),
     };
     let region = match window {
-        Some((xy, z, yaw)) => {
+        Some(w) => {
+            let [xy, z, yaw] = <[f64; 3]>::try_from(w.as_slice()).map_err(|_| {
+                value_error(format!(
+                    "window: expected 3 numbers (xy, z, yaw: metres, metres, degrees), got {}",
+                    w.len()
+                ))
+            })?;
             if guess.is_none() {
                 return Err(value_error("window needs guess (the window's centre)"));
             }
@@ -242,11 +242,11 @@ pub fn align(
     dof: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
-    window: Option<(f64, f64, f64)>,
+    window: Option<Vec<f64>>,
     search: &str,
     refine: bool,
     max_range: f64,
-    threads: usize,
+    threads: i64,
     levels: usize,
 ) -> PyResult<PyAlignment> {
     let params = register_params(
@@ -276,22 +276,20 @@ pub fn align(
 pub fn localize(
     py: Python<'_>,
     scan: &Bound<'_, PyAny>,
-    map: PyRef<'_, PyOccupancyMap>,
+    map: &Bound<'_, PyOccupancyMap>,
     dof: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
-    window: Option<(f64, f64, f64)>,
+    window: Option<Vec<f64>>,
     search: &str,
     refine: bool,
     max_range: f64,
-    threads: usize,
+    threads: i64,
     levels: usize,
 ) -> PyResult<PyAlignment> {
-    let list = map.list().clone();
-    let source_name = map.source_name();
-    drop(map);
+    let map = map.get();
     let params = register_params(
-        list.resolution(),
+        map.resolution_m(),
         levels,
         dof,
         max_tilt,
@@ -302,6 +300,9 @@ pub fn localize(
         max_range,
     )?;
     let s = cloud_arg(scan, "scan")?;
-    let r = detached(py, threads, || library::localize(s.get(), &list, &params))?.py_err()?;
-    Ok(PyAlignment::new(&r, &s.name(), &source_name))
+    let r = detached(py, threads, || {
+        library::localize(s.get(), &map.read(), &params)
+    })?
+    .py_err()?;
+    Ok(PyAlignment::new(&r, &s.name(), &map.source_name()))
 }

@@ -121,36 +121,47 @@ pub fn detect_beacons<'py>(
         floats(angles, "angles")?,
         intensities,
     )?;
-    let found = match method {
-        "lsq" => {
-            let mut p = LsqParams::default();
-            if let Some(m) = max_rms {
-                p.max_rms = m;
-            }
-            detect_circles_lsq(&scan, radius, &p)
-        }
-        "reflective" => {
-            if scan.intensities.is_none() {
-                return Err(value_error(
-                    "method \"reflective\" needs intensities (bright returns mark beacons)",
-                ));
-            }
-            let mut p = ReflectiveParams {
-                intensity_threshold,
-                ..Default::default()
-            };
-            if let Some(m) = max_rms {
-                p.max_rms = m;
-            }
-            detect_circles_reflective(&scan, radius, &p)
-        }
-        "rwht" => detect_circles_rwht(&scan, radius, &RwhtParams::default()),
+    #[derive(Clone, Copy)]
+    enum Method {
+        Lsq,
+        Reflective,
+        Rwht,
+    }
+    let m = match method {
+        "lsq" => Method::Lsq,
+        "reflective" => Method::Reflective,
+        "rwht" => Method::Rwht,
         other => {
             return Err(value_error(format!(
                 "method: expected \"lsq\", \"rwht\" or \"reflective\", got {other:?}"
             )))
         }
     };
+    if matches!(m, Method::Reflective) && scan.intensities.is_none() {
+        return Err(value_error(
+            "method \"reflective\" needs intensities (bright returns mark beacons)",
+        ));
+    }
+    let found = py.detach(|| match m {
+        Method::Lsq => {
+            let mut p = LsqParams::default();
+            if let Some(r) = max_rms {
+                p.max_rms = r;
+            }
+            detect_circles_lsq(&scan, radius, &p)
+        }
+        Method::Reflective => {
+            let mut p = ReflectiveParams {
+                intensity_threshold,
+                ..Default::default()
+            };
+            if let Some(r) = max_rms {
+                p.max_rms = r;
+            }
+            detect_circles_reflective(&scan, radius, &p)
+        }
+        Method::Rwht => detect_circles_rwht(&scan, radius, &RwhtParams::default()),
+    });
     let report = BeaconsReport::new("<array>", method, radius, scan.len(), &found);
     to_python(py, &report.detections)
 }

@@ -84,8 +84,8 @@ impl PyMapBuild {
 ///         (default 0.1).
 ///     mode: ``"batch"`` (default: the best-overlapping scan joins next) or
 ///         ``"sequential"`` (input order).
-///     dof: ``"xy-yaw"``, ``"xyz-yaw"`` (default) or ``"6dof"``; ``max_tilt``: degrees
-///         (default 15).
+///     dof: ``"xy-yaw"``, ``"xyz-yaw"`` (default) or ``"6dof"``.
+///     max_tilt: ``"6dof"`` only: largest roll and pitch searched, degrees (default 15).
 ///     max_range: ignore points farther than this from their sensor, metres (default 30).
 ///     names: the scans' names in the report (default ``scan000``, ``scan001``, ...).
 ///     first: index of the scan that defines the map frame (default 0).
@@ -125,9 +125,9 @@ pub fn build_map(
     first: usize,
     bucket_radius: f64,
     min_count: u16,
-    register_band: Option<(f64, f64)>,
+    register_band: Option<Vec<f64>>,
     graph: bool,
-    threads: usize,
+    threads: i64,
     progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyMapBuild> {
     let mut progress = PyProgress::new(progress)?;
@@ -206,7 +206,18 @@ pub fn build_map(
         bucket_radius,
         min_count,
         keep_scan_maps: false,
-        register_band,
+        register_band: match register_band {
+            Some(b) => {
+                let [lo, hi] = <[f64; 2]>::try_from(b.as_slice()).map_err(|_| {
+                    value_error(format!(
+                        "register_band: expected 2 numbers (z_min, z_max in metres), got {}",
+                        b.len()
+                    ))
+                })?;
+                Some((lo, hi))
+            }
+            None => None,
+        },
         graph: graph.then(GraphRefineParams::default),
         ..Default::default()
     };

@@ -100,7 +100,9 @@ impl PyPointCloud {
     /// origin transformed, intensity kept.
     fn transformed(&self, pose: &Bound<'_, PyAny>) -> PyResult<Self> {
         let p = convert::pose(pose, "pose")?;
-        Ok(PyPointCloud::from_cloud(self.cloud.transformed(&p)))
+        Ok(PyPointCloud::from_cloud(
+            pose.py().detach(|| self.cloud.transformed(&p)),
+        ))
     }
 
     fn __len__(&self) -> usize {

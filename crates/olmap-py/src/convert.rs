@@ -77,15 +77,16 @@ pub fn array_n3<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Array2<f64
             view.ncols()
         )));
     }
+    // Points are stored as float32: a value beyond its range (3.4e38) would become inf.
     if let Some((i, row)) = view
         .rows()
         .into_iter()
         .enumerate()
-        .find(|(_, r)| r.iter().any(|v| !v.is_finite()))
+        .find(|(_, r)| r.iter().any(|v| !(*v as f32).is_finite()))
     {
         return Err(value_error(format!(
-            "{what}: row {i} is not finite ({}, {}, {}); drop such rows first, e.g. \
-             points[np.isfinite(points).all(axis=1)]",
+            "{what}: row {i} is not finite in float32 ({}, {}, {}); drop such rows first, \
+             e.g. points[np.isfinite(points).all(axis=1)]",
             row[0], row[1], row[2]
         )));
     }

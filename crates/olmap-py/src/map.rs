@@ -2,8 +2,9 @@
 //! list, thesis §5.3.1).
 
 use std::path::PathBuf;
+use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use olmap::geometry::Pose;
@@ -21,24 +22,46 @@ use crate::threads::detached;
 /// (olmap's format) and ``.bt`` (OctoMap's binary tree).
 ///
 /// ``OccupancyMap(resolution=0.05)``: an empty map, ``resolution`` in metres.
-#[pyclass(module = "olmap", name = "OccupancyMap")]
+///
+/// Points are stored and looked up as float32, like every olmap cloud: ``counts(p)`` finds
+/// the voxels ``insert_scan(p)`` filled. A map may be used from several Python threads:
+/// queries run at the same time, an insertion or merge waits for them (and they for it),
+/// all with the GIL released.
+#[pyclass(frozen, module = "olmap", name = "OccupancyMap")]
 pub struct PyOccupancyMap {
-    list: OccupancyList,
+    list: RwLock<OccupancyList>,
+    resolution: f64,
     source: String,
 }
 
 impl PyOccupancyMap {
     /// A map made in memory.
     pub fn from_list(list: OccupancyList) -> Self {
+        Self::with_source(list, "<map>".into())
+    }
+
+    fn with_source(list: OccupancyList, source: String) -> Self {
         PyOccupancyMap {
-            list,
-            source: "<map>".into(),
+            resolution: list.resolution(),
+            list: RwLock::new(list),
+            source,
         }
     }
 
-    /// The list.
-    pub fn list(&self) -> &OccupancyList {
-        &self.list
+    /// The list, for reading (other readers may hold it too; a writer waits). Call with the
+    /// GIL released: a writer may hold the lock for a whole insertion.
+    pub fn read(&self) -> RwLockReadGuard<'_, OccupancyList> {
+        self.list.read().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The list, for writing (waits for every reader). Call with the GIL released.
+    fn write(&self) -> RwLockWriteGuard<'_, OccupancyList> {
+        self.list.write().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Voxel edge, metres.
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution
     }
 
     /// The file the map was loaded from, or `<map>`.
@@ -72,7 +95,7 @@ impl PyOccupancyMap {
     /// Voxel edge, metres.
     #[getter]
     fn resolution(&self) -> f64 {
-        self.list.resolution()
+        self.resolution
     }
 
     /// The file the map was loaded from, or ``"<map>"``.
@@ -81,15 +104,15 @@ impl PyOccupancyMap {
         self.source.clone()
     }
 
-    fn __len__(&self) -> usize {
-        self.list.len()
+    fn __len__(&self, py: Python<'_>) -> usize {
+        py.detach(|| self.read().len())
     }
 
-    fn __repr__(&self) -> String {
+    fn __repr__(&self, py: Python<'_>) -> String {
         format!(
             "OccupancyMap({} voxels at {} m, source={:?})",
-            self.list.len(),
-            self.list.resolution(),
+            self.__len__(py),
+            self.resolution,
             self.source
         )
     }
@@ -118,13 +141,13 @@ impl PyOccupancyMap {
     ///     olmap.TooLargeError: a point whose voxel key is outside the representable range.
     #[pyo3(signature = (points, pose=None, ray_trace=true, max_range=30.0, threads=0))]
     fn insert_scan<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
         pose: Option<&Bound<'py, PyAny>>,
         ray_trace: bool,
         max_range: f64,
-        threads: usize,
+        threads: i64,
     ) -> PyResult<Bound<'py, PyDict>> {
         let cloud = cloud_arg(points, "points")?;
         let pose = match pose {
@@ -135,10 +158,12 @@ impl PyOccupancyMap {
             max_range,
             ..Default::default()
         };
-        model.validate().py_err()?;
-        let list = &mut self.list;
+        if ray_trace {
+            model.validate().py_err()?;
+        }
         let stats = detached(py, threads, || -> olmap::Result<occupancy::InsertStats> {
             let c = cloud.get();
+            let mut list = self.write();
             list.check_keys(c, &pose, "points")?;
             if ray_trace {
                 list.insert_scan(c, &pose, &model)
@@ -156,25 +181,26 @@ impl PyOccupancyMap {
         stats_dict(py, &stats)
     }
 
-    /// The count of the voxel holding ``xyz`` (3 numbers, metres); 0 when not stored.
-    fn count_at(&self, xyz: &Bound<'_, PyAny>) -> PyResult<u16> {
-        let p = convert::vector3(xyz, "xyz")?;
-        Ok(self.list.count_at(&Point3::from(p)))
+    /// The count of the voxel holding ``xyz`` (3 numbers, metres, rounded to float32 as
+    /// stored points are); 0 when not stored.
+    fn count_at(&self, py: Python<'_>, xyz: &Bound<'_, PyAny>) -> PyResult<u16> {
+        let p = as_stored(convert::vector3(xyz, "xyz")?);
+        Ok(py.detach(|| self.read().count_at(&p)))
     }
 
-    /// The counts of the voxels holding each point of an (N, 3) array-like (metres), as an
-    /// (N,) int64 array.
+    /// The counts of the voxels holding each point of an (N, 3) array-like (metres, rounded
+    /// to float32 as stored points are), as an (N,) int64 array.
     fn counts<'py>(
         &self,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let rows = array_n3(points, "points")?;
-        let list = &self.list;
         let counts: Vec<i64> = py.detach(|| {
+            let list = self.read();
             rows.rows()
                 .into_iter()
-                .map(|r| i64::from(list.count_at(&Point3::new(r[0], r[1], r[2]))))
+                .map(|r| i64::from(list.count_at(&as_stored(Vector3::new(r[0], r[1], r[2])))))
                 .collect()
         });
         Ok(counts.into_pyarray(py))
@@ -186,10 +212,14 @@ impl PyOccupancyMap {
         &self,
         py: Python<'py>,
     ) -> (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<i64>>) {
-        let sorted = self.list.sorted();
-        let centres =
-            Array2::from_shape_fn((sorted.len(), 3), |(i, k)| self.list.center(sorted[i].0)[k]);
-        let counts = Array1::from_iter(sorted.iter().map(|(_, c)| i64::from(*c)));
+        let (centres, counts) = py.detach(|| {
+            let list = self.read();
+            let sorted = list.sorted();
+            let centres =
+                Array2::from_shape_fn((sorted.len(), 3), |(i, k)| list.center(sorted[i].0)[k]);
+            let counts = Array1::from_iter(sorted.iter().map(|(_, c)| i64::from(*c)));
+            (centres, counts)
+        });
         (centres.into_pyarray(py), counts.into_pyarray(py))
     }
 
@@ -217,35 +247,46 @@ impl PyOccupancyMap {
     ) -> PyResult<Option<(Bound<'py, PyArray1<f64>>, f64)>> {
         let o = Point3::from(convert::vector3(origin, "origin")?);
         let d = convert::vector3(direction, "direction")?;
-        let hit = self
-            .list
-            .cast_ray(&o, &d, max_range, min_count.max(1))
+        let hit = py
+            .detach(|| {
+                let list = self.read();
+                list.cast_ray(&o, &d, max_range, min_count.max(1))
+                    .map(|h| h.map(|h| (list.center(h.key), h.distance)))
+            })
             .py_err()?;
-        Ok(hit.map(|h| {
-            let c = self.list.center(h.key);
-            (vector_array(py, [c.x, c.y, c.z]), h.distance)
-        }))
+        Ok(hit.map(|(c, distance)| (vector_array(py, [c.x, c.y, c.z]), distance)))
     }
 
     /// Adds ``other``'s counts voxel by voxel (both maps must have the same resolution);
-    /// counts are clamped at the sensor model's maximum (1023).
-    fn merge(&mut self, other: PyRef<'_, PyOccupancyMap>) -> PyResult<()> {
-        self.list.merge(&other.list).py_err()
+    /// counts are clamped at the sensor model's maximum (1023). ``m.merge(m)`` doubles
+    /// every count.
+    fn merge(&self, py: Python<'_>, other: &Bound<'_, PyOccupancyMap>) -> PyResult<()> {
+        let other = other.get();
+        py.detach(|| {
+            if std::ptr::eq(self, other) {
+                let copy = self.read().clone();
+                self.write().merge(&copy)
+            } else {
+                let theirs = other.read();
+                self.write().merge(&theirs)
+            }
+        })
+        .py_err()
     }
 
     /// A new map holding only the voxels with a count of at least ``min_count``.
-    fn threshold(&self, min_count: u16) -> Self {
-        PyOccupancyMap::from_list(self.list.threshold(min_count))
+    fn threshold(&self, py: Python<'_>, min_count: u16) -> Self {
+        py.detach(|| PyOccupancyMap::from_list(self.read().threshold(min_count)))
     }
 
     /// Writes the map, as ``.olm`` or ``.bt`` (OctoMap) by the file name, atomically.
     ///
     /// Raises:
-    ///     ValueError: the name is neither ``.olm`` nor ``.bt``.
-    ///     OSError: the file cannot be written.
+    ///     olmap.FormatError: the name is neither ``.olm`` nor ``.bt``.
+    ///     OSError: the file cannot be written (the message names it).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let list = &self.list;
-        py.detach(|| occupancy::write_map(&path, list)).py_err()?;
+        py.detach(|| occupancy::write_map(&path, &self.read()))
+            .py_err()?;
         Ok(())
     }
 
@@ -253,15 +294,25 @@ impl PyOccupancyMap {
     /// voxels at the tree's resolution).
     ///
     /// Raises:
-    ///     FileNotFoundError, PermissionError: the file cannot be opened.
-    ///     olmap.FormatError: the file is not a valid map.
+    ///     FileNotFoundError, PermissionError, IsADirectoryError: the file cannot be opened.
+    ///     olmap.FormatError: the file is not a valid map (or not named .olm or .bt).
     ///     olmap.TooLargeError: the tree expands beyond olmap's voxel limit.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
         let loaded = py.detach(|| occupancy::read_map(&path)).py_err()?;
-        Ok(PyOccupancyMap {
-            list: loaded.map,
-            source: path.display().to_string(),
-        })
+        Ok(PyOccupancyMap::with_source(
+            loaded.map,
+            path.display().to_string(),
+        ))
     }
+}
+
+/// A query point as the map stores points: rounded to float32 (the precision of every
+/// olmap cloud), so that a point looks up the voxel its insertion filled.
+fn as_stored(p: Vector3<f64>) -> Point3<f64> {
+    Point3::new(
+        f64::from(p.x as f32),
+        f64::from(p.y as f32),
+        f64::from(p.z as f32),
+    )
 }

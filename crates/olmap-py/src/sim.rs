@@ -322,7 +322,7 @@ pub fn map_team(
     clearing: bool,
     graph: bool,
     out: Option<PathBuf>,
-    threads: usize,
+    threads: i64,
     progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyTeamResult> {
     let mut reports = PyProgress::new(progress)?;

@@ -8,11 +8,16 @@ use pyo3::prelude::*;
 /// capped at the machine's cores like the command line's `--threads` (a warning says so).
 /// Everything `work` uses must be owned by Rust: it runs while Python may change or free
 /// its own objects.
-pub fn detached<T, F>(py: Python<'_>, threads: usize, work: F) -> PyResult<T>
+pub fn detached<T, F>(py: Python<'_>, threads: i64, work: F) -> PyResult<T>
 where
     T: Send,
     F: FnOnce() -> T + Send,
 {
+    let threads = usize::try_from(threads).map_err(|_| {
+        crate::errors::value_error(format!(
+            "threads: expected 0 (one per core) or a positive count, got {threads}"
+        ))
+    })?;
     let count = olmap::limits::thread_count(threads);
     if let Some(note) = count.note() {
         let message = std::ffi::CString::new(format!("threads: {note}"))

@@ -14,6 +14,15 @@ def scan(data, i):
     return data / "3dtk_dat" / f"scan00{i}.3d"
 
 
+def yaw_pitch_roll_deg(t):
+    """ZYX Euler angles of a 4x4 pose, degrees (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    r = t[:3, :3]
+    yaw = np.arctan2(r[1, 0], r[0, 0])
+    pitch = -np.arcsin(np.clip(r[2, 0], -1.0, 1.0))
+    roll = np.arctan2(r[2, 1], r[2, 2])
+    return np.degrees([yaw, pitch, roll])
+
+
 def assert_same_alignment(res, report):
     assert np.abs(res.T_target_source - np.array(report["T_target_source"])).max() <= POSE_TOL
     assert res.trusted == report["trusted"]
@@ -115,6 +124,8 @@ def test_build_map_equals_the_cli(data, cli, tmp_path):
         assert np.abs(pose[:3, 3] - np.array(cli_pose["xyz_m"])).max() <= POSE_TOL, name
         ypr = np.array(py_placed[name]["yaw_pitch_roll_deg"])
         assert np.abs(ypr - np.array(cli_pose["yaw_pitch_roll_deg"])).max() <= POSE_TOL, name
+        # The rotation of the pose matrix itself, against the CLI's ZYX angles.
+        assert np.abs(yaw_pitch_roll_deg(pose) - np.array(cli_pose["yaw_pitch_roll_deg"])).max() <= 1e-7, name
     assert [r["name"] for r in build.report["rejected"]] == [r["name"] for r in report["rejected"]]
     assert build.report["voxels"] == report["voxels"]
     c_cli, n_cli = olmap.OccupancyMap.load(out).voxels()

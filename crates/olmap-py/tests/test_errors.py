@@ -26,6 +26,14 @@ def test_bad_point_arrays_are_value_errors():
 def test_bad_parameters_are_value_errors():
     with pytest.raises(ValueError, match=r"dof: expected"):
         olmap.align(GOOD, GOOD, dof="xyz")
+    with pytest.raises(ValueError, match=r"threads: expected 0"):
+        olmap.align(GOOD, GOOD, threads=-1)
+    with pytest.raises(ValueError, match=r"window: expected 3 numbers"):
+        olmap.align(GOOD, GOOD, guess=np.eye(4), window=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"max_tilt|tilt"):
+        olmap.align(GOOD, GOOD, dof="6dof", max_tilt=200.0)
+    with pytest.raises(ValueError, match=r"not finite in float32"):
+        olmap.PointCloud([[1e39, 0.0, 0.0]])
     with pytest.raises(ValueError, match=r"window needs guess"):
         olmap.align(GOOD, GOOD, window=(1.0, 0.1, 10.0))
     with pytest.raises(ValueError, match=r"search: expected"):

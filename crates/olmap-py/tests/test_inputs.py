@@ -12,6 +12,12 @@ def reference(pair):
     return olmap.align(*pair)
 
 
+def readonly(points):
+    a = points.copy()
+    a.flags.writeable = False
+    return a
+
+
 def variants(points):
     """The same (N, 3) float64 points in many layouts (float32 holds them exactly: olmap
     stores points as float32)."""
@@ -25,7 +31,8 @@ def variants(points):
         "float32 Fortran": np.asfortranarray(points.astype(np.float32)),
         "column slice of a wider array": wide[:, 2:5],
         "every other row": doubled[::2],
-        "transposed (3, N) array": np.ascontiguousarray(points.T).T,
+        "read-only": readonly(points),
+        "big-endian float64": points.astype(">f8"),
         "PointCloud": olmap.PointCloud(points),
     }
 

@@ -28,6 +28,23 @@ def test_endpoint_counts_and_queries():
     assert list(counts) == [2, 1]
 
 
+def test_points_on_voxel_boundaries_are_found_where_they_were_inserted():
+    """Points are stored as float32: 0.3 is 0.30000001 there (voxel 3 at 0.1 m) but
+    0.29999999999999999 as float64 (voxel 2). Queries round the same way as insertion."""
+    pts = np.array([[0.3, 0.7, 1.1], [0.6, 0.9, 0.2], [1.5, 2.3, 0.3]])
+    m = olmap.OccupancyMap(resolution=0.1)
+    m.insert_scan(pts, ray_trace=False)
+    assert list(m.counts(pts)) == [1, 1, 1]
+    assert all(m.count_at(p) == 1 for p in pts)
+
+
+def test_merging_a_map_into_itself_doubles_it():
+    m = olmap.OccupancyMap(0.1)
+    m.insert_scan(wall_scan(2.05), ray_trace=False)
+    m.merge(m)
+    assert m.count_at([2.05, 0.05, 1.0]) == 2
+
+
 def test_ray_tracing_clears_what_a_later_scan_sees_through():
     m = olmap.OccupancyMap(resolution=0.1)
     m.insert_scan(wall_scan(2.05))

@@ -189,28 +189,30 @@ pub(crate) fn team_run_into(
     job: &TeamJob<'_>,
     progress: Progress<'_>,
 ) -> Result<TeamRun> {
+    let total = job.store.len();
+    let team = map_team(job.store, job.params, |done, _| {
+        progress(Stage::TeamMap, done, total)
+    })?;
     let staged = |set: &mut OutputSet, name: &str| set.path(&job.out.join(name));
-    // Every output path is staged (checked) before the mapping starts.
-    let paths = [
-        staged(set, "team.olm")?,
-        staged(set, "team.bt")?,
-        staged(set, "team.ply")?,
-        staged(set, "team_poses.txt")?,
-        staged(set, "team.store")?,
-    ];
-    let solo_dir = if job.solo {
-        Some(staged(set, "solo")?)
+    write_maps(
+        &staged(set, "team.olm")?,
+        &staged(set, "team.bt")?,
+        &staged(set, "team.ply")?,
+        &team.build.map,
+    )?;
+    let team_poses = team.poses();
+    team_poses.write_path(staged(set, "team_poses.txt")?)?;
+    job.store.write(staged(set, "team.store")?)?;
+    let team_eval = job.truth.map(|t| evaluate(&team_poses, t)).transpose()?;
+    let solo = if job.solo {
+        let dir = staged(set, "solo")?;
+        let runs = solo_runs(job.store, job.params, job.truth, progress)?;
+        write_solo(job.store, &runs, &dir)?;
+        runs
     } else {
-        None
+        Vec::new()
     };
-    let TeamResult { report, team, solo } =
-        run_team_in_memory(job.store, job.truth, job.params, job.solo, progress)?;
-    write_maps(&paths[0], &paths[1], &paths[2], &team.build.map)?;
-    team.poses().write_path(&paths[3])?;
-    job.store.write(&paths[4])?;
-    if let Some(dir) = &solo_dir {
-        write_solo(job.store, &solo, dir)?;
-    }
+    let report = TeamReport::new(job.store, &team, team_eval.as_ref(), &solo, job.solo);
     write_atomic(&staged(set, "report.json")?, "JSON", |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)
     })?;
