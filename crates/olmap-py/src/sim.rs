@@ -129,6 +129,9 @@ impl PySimDataset {
     }
 }
 
+/// A choice by name, made by calling the constructor chosen.
+type Named<T> = (&'static str, fn() -> T);
+
 fn choice<T: Copy>(what: &str, value: &str, options: &[(&str, T)]) -> PyResult<T> {
     options
         .iter()
@@ -191,38 +194,24 @@ pub fn simulate(
             "range_noise: expected a finite number >= 0 (metres), got {range_noise}"
         )));
     }
-    #[derive(Clone, Copy)]
-    enum Scanner {
-        Mirror,
-        MirrorStandard,
-        Lidar,
-    }
-    let mut scanner = match choice(
-        "scanner",
-        scanner,
-        &[
-            ("mirror", Scanner::Mirror),
-            ("mirror-standard", Scanner::MirrorStandard),
-            ("lidar", Scanner::Lidar),
-        ],
-    )? {
-        Scanner::Mirror => Scanner3d::Mirror(MirrorScanner::enhanced()),
-        Scanner::MirrorStandard => Scanner3d::Mirror(MirrorScanner::standard()),
-        Scanner::Lidar => Scanner3d::Lidar(SpinningLidar::default()),
-    };
+    let scanners: [Named<Scanner3d>; 3] = [
+        ("mirror", || Scanner3d::Mirror(MirrorScanner::enhanced())),
+        ("mirror-standard", || {
+            Scanner3d::Mirror(MirrorScanner::standard())
+        }),
+        ("lidar", || Scanner3d::Lidar(SpinningLidar::default())),
+    ];
+    let mut scanner = choice("scanner", scanner, &scanners)?();
     match &mut scanner {
         Scanner3d::Mirror(m) => m.noise.sigma = range_noise,
         Scanner3d::Lidar(l) => l.noise.sigma = range_noise,
     }
-    let odometry = match choice(
-        "odometry",
-        odometry,
-        &[("none", 0), ("typical", 1), ("degraded", 2)],
-    )? {
-        0 => OdometryNoise::none(),
-        1 => OdometryNoise::typical(),
-        _ => OdometryNoise::degraded(),
-    };
+    let noises: [Named<OdometryNoise>; 3] = [
+        ("none", OdometryNoise::none),
+        ("typical", OdometryNoise::typical),
+        ("degraded", OdometryNoise::degraded),
+    ];
+    let odometry = choice("odometry", odometry, &noises)?();
     let mut config = SimConfig {
         world,
         seed,
