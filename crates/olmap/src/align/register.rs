@@ -4,7 +4,7 @@ use std::borrow::Cow;
 use std::time::Instant;
 
 use super::consistency::Consistency;
-use super::icp::{IcpParams, IcpResult};
+use super::icp::{IcpParams, IcpResult, IcpTarget};
 use super::lattice::Alignment;
 use super::search::global_search;
 use super::target::SearchTarget;
@@ -12,7 +12,7 @@ use super::verdict::{
     agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, window_doubts,
     TrustThresholds,
 };
-use super::verify::{verify, Verification};
+use super::verify::{verify, RefineAgainst, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -88,6 +88,8 @@ struct Against<'a> {
     target: &'a SearchTarget,
     /// Made only when a hypothesis is refined (a map's voxel centres cost a pass).
     points: &'a dyn Fn() -> Cow<'a, PointCloud>,
+    /// The points already prepared for ICP, when the caller keeps them.
+    prepared: Option<&'a IcpTarget>,
 }
 
 fn finish(
@@ -110,7 +112,10 @@ fn finish(
             Some(verify(
                 source,
                 against.target,
-                &points,
+                RefineAgainst {
+                    points: &points,
+                    prepared: against.prepared,
+                },
                 &search,
                 &icp,
                 reach,
@@ -190,14 +195,54 @@ pub fn register_to_split(
     refine_target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
-    let source = refine_source;
+    register_split_against(
+        search_source,
+        refine_source,
+        target,
+        refine_target,
+        None,
+        params,
+    )
+}
+
+/// [`register_to_split`] with the refinement's target points already prepared for ICP
+/// (`prepared`, made from `refine_target` with `params.refine`'s target parameters): what
+/// a mapper that registers many scans against one map keeps between registrations. A
+/// target prepared with other parameters is not used (the points are prepared again).
+pub fn register_to_prepared(
+    search_source: &PointCloud,
+    refine_source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    prepared: &IcpTarget,
+    params: &RegisterParams,
+) -> Result<Registration> {
+    register_split_against(
+        search_source,
+        refine_source,
+        target,
+        refine_target,
+        Some(prepared),
+        params,
+    )
+}
+
+fn register_split_against(
+    search_source: &PointCloud,
+    refine_source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    prepared: Option<&IcpTarget>,
+    params: &RegisterParams,
+) -> Result<Registration> {
     let start = Instant::now();
     let search = global_search(search_source, target, &params.search)?;
     finish(
-        source,
+        refine_source,
         Against {
             target,
             points: &|| Cow::Borrowed(refine_target),
+            prepared,
         },
         search,
         params,
@@ -231,6 +276,7 @@ pub fn localize(
         Against {
             target: &target,
             points: &|| Cow::Owned(map.to_cloud()),
+            prepared: None,
         },
         search,
         params,

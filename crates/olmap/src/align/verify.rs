@@ -21,9 +21,17 @@
 //! relative to the winner's is the uniqueness the verdict tests
 //! ([`super::verdict`]). Rivals that the refinement brings back into the winner's basin
 //! are the same solution and do not count.
+//!
+//! Every hypothesis is refined on the thin source of the ICP schedule
+//! ([`super::icp::IcpParams::coarse_voxel_factor`]), which places a scan to millimetres,
+//! far finer than the voxels the fit counts; only the winner is then refined in full (and
+//! its agreement counted again at its final pose). The target points are prepared for ICP
+//! once for all hypotheses (or kept by the caller: a mapper keeps them per map).
+
+use std::time::Instant;
 
 use super::consistency::{consistency_seen, source_view, Consistency};
-use super::icp::{refine, IcpParams, IcpResult};
+use super::icp::{refine_prepared, Depth, IcpParams, IcpResult, IcpSource, IcpTarget};
 use super::lattice::{Alignment, Candidate};
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
@@ -177,31 +185,75 @@ fn starts(search: &Alignment) -> Vec<Candidate> {
     out
 }
 
+/// What the hypotheses are refined and checked against: the target's points (for the
+/// agreement, cropped around each hypothesis) and, when the caller keeps one, the same
+/// points prepared for ICP.
+pub(super) struct RefineAgainst<'a> {
+    /// The target's points, in the target frame.
+    pub(super) points: &'a PointCloud,
+    /// `points` prepared for ICP with the refinement's target parameters; without it the
+    /// points around all hypotheses are prepared once here.
+    pub(super) prepared: Option<&'a IcpTarget>,
+}
+
 /// Refines and scores the search's best and its strong rivals against `target` (the
-/// prepared target, for the agreement) and `points` (the target's points, for ICP),
-/// cropping the points to `reach` metres around each hypothesis' footprint. With `prior`
-/// (a window search's prior pose and a margin in metres) the distinct runner-up is chosen
-/// among the rivals no farther from the prior than the winner plus the margin.
+/// prepared target, for the agreement) and `against` (the target's points: ICP runs on
+/// them, prepared once for all hypotheses; the agreement on them cropped to `reach` metres
+/// around each hypothesis' footprint). With `prior` (a window search's prior pose and a
+/// margin in metres) the distinct runner-up is chosen among the rivals no farther from the
+/// prior than the winner plus the margin.
 pub(super) fn verify(
     source: &PointCloud,
     target: &SearchTarget,
-    points: &PointCloud,
+    against: RefineAgainst<'_>,
     search: &Alignment,
     icp: &IcpParams,
     reach: f64,
     prior: Option<(&Pose, f64)>,
 ) -> Result<Verification> {
     let res = target.resolution();
+    let points = against.points;
     let seen = if points.is_empty() || source.is_empty() {
         None
     } else {
         Some(source_view(source, target)?)
     };
     let distinct_poses = |a: &Pose, b: &Pose| !same_solution(a, b, res);
+    let starts = starts(search);
+    let own;
+    let prepared = match against.prepared {
+        Some(p) if p.prepared_for(icp) => p,
+        _ => {
+            // One preparation for every hypothesis: the points near any of them.
+            let boxes = starts
+                .iter()
+                .filter_map(|s| near_box(source, &s.pose, reach));
+            let near_any = match boxes.reduce(|a, b| a.union(&b)) {
+                Some(b) => points.crop_box(&b),
+                None => points.clone(),
+            };
+            own = IcpTarget::new(&near_any, icp)?;
+            &own
+        }
+    };
+    let near = |pose: &Pose| match near_box(source, pose, reach) {
+        Some(b) => points.crop_box(&b),
+        None => points.clone(),
+    };
+    // Every hypothesis is refined on the thin source (enough to compare fits at the
+    // search's resolution); the winner is then refined in full.
+    let thin = IcpSource::new(source, icp)?;
     let mut hypotheses: Vec<Hypothesis> = Vec::new();
-    for start in starts(search) {
-        let near = crop_near(source, points, &start.pose, reach);
-        let refinement = refine(source, &near, &start.pose, icp)?;
+    for start in starts {
+        let near = near(&start.pose);
+        let refinement = refine_prepared(
+            &thin,
+            prepared,
+            &start.pose,
+            icp,
+            Depth::Coarse,
+            Instant::now(),
+        );
         let at = if refinement.converged {
             refinement.pose
         } else {
@@ -228,6 +280,36 @@ pub(super) fn verify(
                 .then(b.cmp(&a))
         })
         .unwrap_or(0);
+    if let Some(w) = hypotheses.get_mut(chosen) {
+        // The winner's refinement goes on from where the thin stage left it, on the full
+        // source: together, what `refine` does from the same start.
+        let mut full = refine_prepared(
+            &thin,
+            prepared,
+            &w.refinement.pose,
+            icp,
+            Depth::Finish,
+            Instant::now(),
+        );
+        full.iterations += w.refinement.iterations;
+        full.seconds += w.refinement.seconds;
+        if (full.pose, full.converged) != (w.refinement.pose, w.refinement.converged) {
+            let at = if full.converged {
+                full.pose
+            } else {
+                w.start.pose
+            };
+            w.consistency = consistency_seen(
+                source,
+                seen.as_ref(),
+                target,
+                Some(&near(&w.start.pose)),
+                &at,
+            )?;
+            w.fit = fit(&w.consistency);
+            w.refinement = full;
+        }
+    }
     let won = hypotheses[chosen].pose();
     let distinct = |p: &Pose| distinct_poses(p, &won);
     // With a prior (a window search), a rival counts only when it is about as near the
@@ -257,14 +339,10 @@ pub(super) fn verify(
     })
 }
 
-/// The points within `reach` of the source's footprint at `pose` (all of them when the
-/// source has none).
-fn crop_near(source: &PointCloud, points: &PointCloud, pose: &Pose, reach: f64) -> PointCloud {
-    match source.transformed(pose).bounding_box() {
-        Some(b) => {
-            let m = nalgebra::Vector3::repeat(reach);
-            points.crop_box(&Aabb::new(b.min - m, b.max + m))
-        }
-        None => points.clone(),
-    }
+/// The source's footprint at `pose` widened by `reach` metres (`None` when the source has
+/// no point).
+fn near_box(source: &PointCloud, pose: &Pose, reach: f64) -> Option<Aabb> {
+    let b = source.transformed(pose).bounding_box()?;
+    let m = nalgebra::Vector3::repeat(reach);
+    Some(Aabb::new(b.min - m, b.max + m))
 }

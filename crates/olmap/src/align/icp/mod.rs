@@ -11,9 +11,16 @@
 //!   sensor origin are dropped, then both clouds are voxel-downsampled (source
 //!   [`IcpParams::source_voxel`], target [`IcpParams::target_voxel`]): this evens out the
 //!   density of scanners, which is very high near the sensor, and bounds the cost. A k-d tree
-//!   ([`kiddo`]) is built once over the target points.
+//!   ([`kiddo`]) is built once over the target points. [`IcpTarget`] keeps a prepared
+//!   target for many refinements ([`refine_to`]).
+//! * **Thin, then full source.** The schedule first runs on the source downsampled
+//!   [`IcpParams::coarse_voxel_factor`] times coarser, to convergence at ten times the
+//!   epsilons; the remaining iterations (usually two or three) and the statistics use the
+//!   source at [`IcpParams::source_voxel`]. Most iterations then cost a ninth as much, and
+//!   the result keeps the precision of the full source.
 //! * **Target normals.** The target's own normals are used when it has them; otherwise each
-//!   target point's normal is the eigenvector of the smallest eigenvalue of the covariance of
+//!   target point's normal (computed when a correspondence first needs it, then kept) is the
+//!   eigenvector of the smallest eigenvalue of the covariance of
 //!   its [`IcpParams::normal_k`] nearest neighbours (PCA). With the eigenvalues sorted
 //!   `λ0 ≤ λ1 ≤ λ2`, neighbourhoods whose planarity `(λ1 - λ0) / λ2` is below
 //!   [`IcpParams::min_planarity`] (lines, corners, clutter) get no normal and are never
@@ -82,13 +89,15 @@ mod target;
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 pub use self::degeneracy::Degeneracy;
 pub use self::params::{IcpParams, RobustKernel};
 use self::reduce::{accumulate, statistics, Statistics};
 use self::solve::solve;
-use self::target::{prepare_source, Target};
+pub(crate) use self::target::IcpSource;
+pub use self::target::IcpTarget;
+use self::target::{Source, Target};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::geometry::Pose;
@@ -177,98 +186,138 @@ pub fn refine(
 ) -> Result<IcpResult> {
     let started = Instant::now();
     params.validate()?;
-    if !initial.to_matrix4().iter().all(|v| v.is_finite()) {
+    check_initial(initial)?;
+    let prepared = IcpTarget::new(target, params)?;
+    refine_from(source, &prepared, initial, params, started)
+}
+
+/// [`refine`] against a target prepared once ([`IcpTarget`]): the same result as [`refine`]
+/// on the cloud it was prepared from, without preparing it again.
+///
+/// # Errors
+/// As [`refine`], and [`Error::InvalidArgument`] when `target` was prepared with other
+/// target parameters ([`IcpTarget::prepared_for`]).
+pub fn refine_to(
+    source: &PointCloud,
+    target: &IcpTarget,
+    initial: &Pose,
+    params: &IcpParams,
+) -> Result<IcpResult> {
+    let started = Instant::now();
+    params.validate()?;
+    check_initial(initial)?;
+    if !target.prepared_for(params) {
         return Err(Error::InvalidArgument(
-            "ICP: the initial pose is not finite".into(),
+            "ICP: the target was prepared with other target parameters (voxel, normals, \
+             normal_k or planarity) than this refinement's"
+                .into(),
         ));
     }
+    refine_from(source, target, initial, params, started)
+}
 
-    let src = prepare_source(source, params)?;
-    let tgt = Target::new(target, params)?;
+/// A non-finite initial pose is an error.
+fn check_initial(initial: &Pose) -> Result<()> {
+    if initial.to_matrix4().iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::InvalidArgument(
+            "ICP: the initial pose is not finite".into(),
+        ))
+    }
+}
+
+/// How far [`refine_prepared`] goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Depth {
+    /// The thin stage (when the source has one), then the full source: [`refine`].
+    Full,
+    /// The thin stage alone (the full source when there is none), to
+    /// [`COARSE_EPSILON_FACTOR`] times the epsilons, with its statistics: enough to compare
+    /// hypotheses at the search's resolution.
+    Coarse,
+    /// The full source alone from the final distance: what [`Depth::Full`] adds to a
+    /// [`Depth::Coarse`] result (start from its pose).
+    Finish,
+}
+
+/// Extrapolation of a steady run of steps (see [`schedule`]): consecutive Gauss-Newton
+/// updates at most this far apart in direction (cosine; about 18°)...
+const ACCEL_MIN_COSINE: f64 = 0.95;
+
+/// ... move the estimate by at most this many times the last update.
+const ACCEL_MAX_FACTOR: f64 = 4.0;
+
+/// The thin stage converges at this many times the epsilons (the full source finishes).
+pub(crate) const COARSE_EPSILON_FACTOR: f64 = 10.0;
+
+/// The refinement proper (parameters checked, target prepared).
+fn refine_from(
+    source: &PointCloud,
+    target: &IcpTarget,
+    initial: &Pose,
+    params: &IcpParams,
+    started: Instant,
+) -> Result<IcpResult> {
+    let src = IcpSource::new(source, params)?;
+    Ok(refine_prepared(
+        &src,
+        target,
+        initial,
+        params,
+        Depth::Full,
+        started,
+    ))
+}
+
+/// [`refine_to`] with the source prepared too (parameters and initial pose already
+/// checked), to `depth`.
+pub(crate) fn refine_prepared(
+    src: &IcpSource,
+    target: &IcpTarget,
+    initial: &Pose,
+    params: &IcpParams,
+    depth: Depth,
+    started: Instant,
+) -> IcpResult {
+    let tgt = target.inner.as_ref();
     let mut pose = *initial.isometry();
-
     let mut converged = false;
     let mut iterations = 0;
-    if let (Some(tgt), false) = (&tgt, src.points.is_empty()) {
-        let min_matches =
-            ((params.min_correspondence_fraction * src.points.len() as f64).ceil() as usize).max(6);
-        let mut d = params.max_distance_start;
-        let mut two_back: Option<Isometry3<f64>> = None;
-        for _ in 0..params.max_iterations {
-            iterations += 1;
-            let at_end = d <= params.max_distance_end;
-            let centre = pose * src.centroid;
-            let acc = accumulate(
-                &src.points,
+    let thin = src.coarse.as_ref();
+    let mut stopped = false;
+    let last: &Source = match depth {
+        Depth::Coarse => thin.unwrap_or(&src.fine),
+        Depth::Full | Depth::Finish => &src.fine,
+    };
+    if let (Some(tgt), false) = (tgt, src.fine.points.is_empty()) {
+        let mut d = match depth {
+            Depth::Finish => params.max_distance_end,
+            Depth::Full | Depth::Coarse => params.max_distance_start,
+        };
+        let first = match depth {
+            Depth::Finish => None,
+            Depth::Full | Depth::Coarse => Some(thin.unwrap_or(&src.fine)),
+        };
+        if let Some(first) = first {
+            let s = schedule(
+                first,
                 tgt,
-                &pose,
+                pose,
                 d,
-                centre,
-                src.radius,
                 params,
-                false,
+                COARSE_EPSILON_FACTOR,
+                params.max_iterations,
             );
-            if acc.matched < min_matches {
-                break;
-            }
-            // RMS distance of the (moved) source from each axis through its centre: the
-            // scale at which the degenerate directions are judged, as in `Degeneracy`.
-            let cov = pose.rotation.to_rotation_matrix()
-                * src.cov
-                * pose.rotation.to_rotation_matrix().transpose();
-            let axis_rms = Vector3::from_fn(|k, _| (cov.trace() - cov[(k, k)]).max(1e-6).sqrt());
-            let Some(delta) = solve(
-                &acc.h,
-                &acc.g,
-                params.degenerate_fraction,
-                &(axis_rms / src.radius),
-            ) else {
-                break;
-            };
-            // The update in the centred, scaled coordinates: `w_scaled = ω · L`, `v` = motion of
-            // the centroid. `step` is how far it moves points at the RMS radius (about).
-            let (mut w_scaled, mut v) = (
-                Vector3::new(delta[0], delta[1], delta[2]),
-                Vector3::new(delta[3], delta[4], delta[5]),
-            );
-            let mut step = w_scaled.norm().max(v.norm());
-            // Trust region: no step moves the points by more than the correspondence distance.
-            if step > d {
-                w_scaled *= d / step;
-                v *= d / step;
-                step = d;
-            }
-            let omega = w_scaled / src.radius;
-            let rot = UnitQuaternion::from_scaled_axis(omega);
-            let t = centre.coords + v - rot * centre.coords;
-            let before = pose;
-            pose = Isometry3::from_parts(Translation3::from(t), rot) * pose;
-            if at_end
-                && v.norm() < params.translation_epsilon
-                && omega.norm() < params.rotation_epsilon
-            {
-                converged = true;
-                break;
-            }
-            // A two-step cycle (nearest neighbours flipping between two sets) at the final
-            // distance is as settled as the estimate gets.
-            if at_end {
-                if let Some(p2) = two_back {
-                    let back: Isometry3<f64> = p2;
-                    let diff = back.inverse() * pose;
-                    if diff.translation.vector.norm() < params.translation_epsilon
-                        && diff.rotation.angle() < params.rotation_epsilon
-                    {
-                        converged = true;
-                        break;
-                    }
-                }
-            }
-            two_back = Some(before);
-            // Schedule: shrink the distance once the estimate has settled at this one.
-            if step < params.settle_fraction * d || params.settle_fraction >= 1.0 {
-                d = (d * params.distance_decay).max(params.max_distance_end);
-            }
+            (pose, d, converged, iterations) = (s.pose, s.d, s.converged, s.iterations);
+            stopped = s.stopped;
+        }
+        // A first stage that found too few correspondences (or no solution) ends it.
+        if depth != Depth::Coarse && !stopped {
+            let budget = params.max_iterations.saturating_sub(iterations).max(1);
+            let s = schedule(&src.fine, tgt, pose, d, params, 1.0, budget);
+            (pose, converged) = (s.pose, s.converged);
+            iterations += s.iterations;
         }
     }
 
@@ -280,12 +329,12 @@ pub fn refine(
         degeneracy,
         hessian,
         inliers,
-    } = statistics(&src, tgt.as_ref(), &pose, params);
+    } = statistics(last, tgt, &pose, params);
     if correspondences < 6 {
         converged = false;
     }
 
-    Ok(IcpResult {
+    IcpResult {
         pose: Pose::from_isometry(pose),
         converged,
         iterations,
@@ -296,7 +345,145 @@ pub fn refine(
         hessian,
         inliers,
         seconds: started.elapsed().as_secs_f64(),
-    })
+    }
+}
+
+/// Where a run of the schedule ended.
+struct Settled {
+    pose: Isometry3<f64>,
+    /// The correspondence distance reached.
+    d: f64,
+    converged: bool,
+    iterations: usize,
+    /// Ended by too few correspondences or unsolvable normal equations.
+    stopped: bool,
+}
+
+/// The Gauss-Newton iterations with the shrinking correspondence distance (module
+/// documentation), from `pose` at distance `d`, on `src`, with the epsilons scaled by
+/// `eps_scale`, for at most `max_iterations`.
+fn schedule(
+    src: &Source,
+    tgt: &Target,
+    mut pose: Isometry3<f64>,
+    mut d: f64,
+    params: &IcpParams,
+    eps_scale: f64,
+    max_iterations: usize,
+) -> Settled {
+    let (eps_t, eps_r) = (
+        params.translation_epsilon * eps_scale,
+        params.rotation_epsilon * eps_scale,
+    );
+    let mut converged = false;
+    let mut iterations = 0;
+    let min_matches =
+        ((params.min_correspondence_fraction * src.points.len() as f64).ceil() as usize).max(6);
+    let mut two_back: Option<Isometry3<f64>> = None;
+    let mut previous: Option<(Vector6<f64>, f64)> = None;
+    let mut stopped = false;
+    for _ in 0..max_iterations {
+        iterations += 1;
+        let at_end = d <= params.max_distance_end;
+        let centre = pose * src.centroid;
+        let acc = accumulate(
+            &src.points,
+            tgt,
+            &pose,
+            d,
+            centre,
+            src.radius,
+            params,
+            false,
+        );
+        if acc.matched < min_matches {
+            stopped = true;
+            break;
+        }
+        // RMS distance of the (moved) source from each axis through its centre: the
+        // scale at which the degenerate directions are judged, as in `Degeneracy`.
+        let cov = pose.rotation.to_rotation_matrix()
+            * src.cov
+            * pose.rotation.to_rotation_matrix().transpose();
+        let axis_rms = Vector3::from_fn(|k, _| (cov.trace() - cov[(k, k)]).max(1e-6).sqrt());
+        let Some(delta) = solve(
+            &acc.h,
+            &acc.g,
+            params.degenerate_fraction,
+            &(axis_rms / src.radius),
+        ) else {
+            stopped = true;
+            break;
+        };
+        // The update in the centred, scaled coordinates: `w_scaled = ω · L`, `v` = motion of
+        // the centroid. `step` is how far it moves points at the RMS radius (about).
+        let (mut w_scaled, mut v) = (
+            Vector3::new(delta[0], delta[1], delta[2]),
+            Vector3::new(delta[3], delta[4], delta[5]),
+        );
+        let step = w_scaled.norm().max(v.norm());
+        // The convergence and settling tests judge the Gauss-Newton update itself.
+        let (gn_v, gn_omega) = (v.norm(), w_scaled.norm() / src.radius);
+        // Steps that keep their direction and shrink by a steady ratio `r` (correspondences
+        // sliding along surfaces) are the terms of a geometric series: the estimate moves by
+        // the series' sum, `1 / (1 - r)` times the step (at most `ACCEL_MAX_FACTOR`), as in
+        // Besl and McKay's accelerated ICP. The fixed point is unchanged; only fewer
+        // iterations reach it.
+        let gn = Vector6::new(w_scaled.x, w_scaled.y, w_scaled.z, v.x, v.y, v.z);
+        let mut factor = 1.0;
+        if let Some((prev, prev_d)) = previous {
+            let (a, b) = (gn.norm(), prev.norm());
+            if prev_d == d && a > 0.0 && b > 0.0 {
+                let (r, cos) = (a / b, gn.dot(&prev) / (a * b));
+                if cos >= ACCEL_MIN_COSINE && r < 1.0 {
+                    factor = (1.0 / (1.0 - r)).min(ACCEL_MAX_FACTOR);
+                }
+            }
+        }
+        // After a jump the next step is no term of the same series.
+        previous = (factor == 1.0).then_some((gn, d));
+        w_scaled *= factor;
+        v *= factor;
+        // Trust region: no step moves the points by more than the correspondence distance.
+        let moved = w_scaled.norm().max(v.norm());
+        if moved > d {
+            w_scaled *= d / moved;
+            v *= d / moved;
+        }
+        let step = step.min(d);
+        let omega = w_scaled / src.radius;
+        let rot = UnitQuaternion::from_scaled_axis(omega);
+        let t = centre.coords + v - rot * centre.coords;
+        let before = pose;
+        pose = Isometry3::from_parts(Translation3::from(t), rot) * pose;
+        if at_end && gn_v < eps_t && gn_omega < eps_r {
+            converged = true;
+            break;
+        }
+        // A two-step cycle (nearest neighbours flipping between two sets) at the final
+        // distance is as settled as the estimate gets.
+        if at_end {
+            if let Some(back) = two_back {
+                let diff = back.inverse() * pose;
+                if diff.translation.vector.norm() < eps_t && diff.rotation.angle() < eps_r {
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        two_back = Some(before);
+        // Schedule: shrink the distance once the estimate has settled at this one.
+        if step < params.settle_fraction * d || params.settle_fraction >= 1.0 {
+            d = (d * params.distance_decay).max(params.max_distance_end);
+        }
+    }
+    Settled {
+        pose,
+        d,
+        converged,
+        iterations,
+        stopped,
+    }
 }
 
 impl IcpResult {
@@ -713,6 +900,66 @@ mod tests {
         assert_eq!(res.iterations, 1);
     }
 
+    /// A target prepared once gives every refinement exactly what preparing it again would
+    /// (its normals, computed on first use, depend on the target alone), and refuses a
+    /// refinement with other target parameters.
+    #[test]
+    fn a_prepared_target_gives_the_same_refinements() {
+        let truth = Pose::from_xyz_ypr(0.15, -0.1, 0.02, 0.05, 0.01, 0.0);
+        let (source, target) = scene_pair(&structured_scene(), &truth, 0.005, 7);
+        let params = IcpParams::default();
+        let prepared = IcpTarget::new(&target, &params).unwrap();
+        assert!(!prepared.is_empty() && prepared.prepared_for(&params));
+        let starts = [
+            Pose::identity(),
+            Pose::from_xyz_ypr(0.3, 0.0, 0.0, 0.0, 0.0, 0.0),
+            Pose::from_xyz_ypr(0.0, -0.2, 0.0, 0.1, 0.0, 0.0),
+        ];
+        for start in &starts {
+            let once = refine(&source, &target, start, &params).unwrap();
+            let kept = refine_to(&source, &prepared, start, &params).unwrap();
+            assert_eq!(once.pose, kept.pose);
+            assert_eq!(once.iterations, kept.iterations);
+            assert_eq!(once.inlier_rms.to_bits(), kept.inlier_rms.to_bits());
+            assert!(kept.converged);
+            assert!((kept.pose.translation() - truth.translation()).norm() < 0.01);
+        }
+        let other = IcpParams {
+            normal_k: 12,
+            ..Default::default()
+        };
+        assert!(!prepared.prepared_for(&other));
+        assert!(matches!(
+            refine_to(&source, &prepared, &Pose::identity(), &other),
+            Err(Error::InvalidArgument(_))
+        ));
+    }
+
+    /// The thin stage is a start, not the answer: refining with it ends where refining on
+    /// the full source alone ends (to well under a millimetre; both stop when an update
+    /// moves the points by less than 0.1 mm), from a start 0.3 m and 6° off.
+    #[test]
+    fn the_thin_stage_ends_where_the_full_source_alone_ends() {
+        let truth = Pose::from_xyz_ypr(0.2, 0.15, 0.03, 0.1, 0.02, -0.01);
+        let (source, target) = scene_pair(&structured_scene(), &truth, 0.01, 3);
+        let thin = IcpParams::default();
+        let full_only = IcpParams {
+            coarse_voxel_factor: 1.0,
+            ..Default::default()
+        };
+        let a = refine(&source, &target, &Pose::identity(), &thin).unwrap();
+        let b = refine(&source, &target, &Pose::identity(), &full_only).unwrap();
+        assert!(a.converged && b.converged, "{a:?} {b:?}");
+        assert!(
+            (a.pose.translation() - b.pose.translation()).norm() < 5e-4,
+            "{:?} vs {:?}",
+            a.pose,
+            b.pose
+        );
+        assert!(a.pose.rotation().angle_to(&b.pose.rotation()) < 1e-4);
+        assert!((a.pose.translation() - truth.translation()).norm() < 0.01);
+    }
+
     #[test]
     fn rejects_bad_parameters() {
         let (source, target) = scene_pair(&structured_scene(), &Pose::identity(), 0.0, 1);
@@ -751,6 +998,10 @@ mod tests {
             },
             IcpParams {
                 source_max_range: Some(0.0),
+                ..Default::default()
+            },
+            IcpParams {
+                coarse_voxel_factor: 0.5,
                 ..Default::default()
             },
         ];

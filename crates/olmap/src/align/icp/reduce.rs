@@ -122,7 +122,7 @@ pub(super) fn accumulate(
                     continue;
                 }
                 let i = nn.item as usize;
-                let n = tgt.normals[i];
+                let n = tgt.normal(i);
                 if n == Vector3::zeros() {
                     continue;
                 }
