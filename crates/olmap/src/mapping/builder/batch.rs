@@ -2,6 +2,8 @@
 //! remaining scans to the map and adds the best one, so scans that overlap the map little
 //! wait until it has grown to them. Results whose map region did not change are reused.
 
+use rayon::prelude::*;
+
 use super::register::Found;
 use super::state::{footprint, overlaps, State};
 use super::{placed_record, Placing};
@@ -118,6 +120,17 @@ pub(super) fn place_best_first(
     Ok(())
 }
 
+/// [`State::register`] with the scan's footprint at the result: a cache entry.
+fn attempt(state: &State<'_>, s: usize, allow_global: bool) -> Result<Candidate> {
+    let Found { registration, via } = state.register(s, allow_global)?;
+    let footprint = footprint(&state.clouds[s], &registration.pose);
+    Ok(Candidate {
+        registration,
+        via,
+        footprint,
+    })
+}
+
 impl Batch<'_, '_> {
     /// The unplaced scan whose cached result is the best trusted one (largest overlap
     /// fraction, then significance, then smallest index).
@@ -141,37 +154,56 @@ impl Batch<'_, '_> {
             .map(|(s, _)| s)
     }
 
-    /// Registers scan `s` (unless odometry puts it outside the map) and caches the result.
-    fn try_scan(&mut self, s: usize, placed_now: usize) -> Result<()> {
-        self.pending[s].far = self.state.far_from_map(s);
-        self.pending[s].attempted_at = placed_now;
-        if !self.pending[s].far {
-            self.pending[s].cached = Some(self.attempt(s, false)?);
+    /// Registers the scans `list` (except those odometry puts outside the map) and caches
+    /// the results. The registrations are independent (each reads the map as it is), so
+    /// they run in parallel; the results, and which error is returned, do not depend on the
+    /// number of threads.
+    fn try_scans(&mut self, list: &[usize], placed_now: usize) -> Result<()> {
+        let mut search = Vec::with_capacity(list.len());
+        for &s in list {
+            let far = self.state.far_from_map(s);
+            self.pending[s].far = far;
+            self.pending[s].attempted_at = placed_now;
+            if !far {
+                search.push(s);
+            }
         }
-        Ok(())
+        self.attempt_all(&search, false)
     }
 
-    /// [`State::register`] with the scan's footprint at the result: a cache entry.
-    fn attempt(&mut self, s: usize, allow_global: bool) -> Result<Candidate> {
-        let Found { registration, via } = self.state.register(s, allow_global)?;
-        let footprint = footprint(&self.state.clouds[s], &registration.pose);
-        Ok(Candidate {
-            registration,
-            via,
-            footprint,
-        })
+    /// [`attempt`] on every scan of `list` in parallel; each result replaces the scan's
+    /// cached one (the first error, in `list` order, is returned after all ran).
+    fn attempt_all(&mut self, list: &[usize], allow_global: bool) -> Result<()> {
+        let state = &*self.state;
+        let found: Vec<Result<Candidate>> = list
+            .par_iter()
+            .map(|&s| attempt(state, s, allow_global))
+            .collect();
+        let mut first_error = None;
+        for (&s, f) in list.iter().zip(found) {
+            match f {
+                Ok(c) => self.pending[s].cached = Some(c),
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        first_error.map_or(Ok(()), Err)
     }
 
     /// One round's choice, with `placed_now` scans placed: searches the scans without a
     /// cached result (a far one once per map size), then, when nothing is trusted, the
     /// stale scans ([`Batch::retry_stale`]) and then the far ones regardless of odometry.
     fn choose(&mut self, unplaced: &[usize], placed_now: usize) -> Result<Option<usize>> {
-        for &s in unplaced {
-            let p = &self.pending[s];
-            if p.cached.is_none() && !(p.far && p.attempted_at == placed_now) {
-                self.try_scan(s, placed_now)?;
-            }
-        }
+        let due: Vec<usize> = unplaced
+            .iter()
+            .copied()
+            .filter(|&s| {
+                let p = &self.pending[s];
+                p.cached.is_none() && !(p.far && p.attempted_at == placed_now)
+            })
+            .collect();
+        self.try_scans(&due, placed_now)?;
         let mut best = self.best_trusted(unplaced);
         if best.is_none() {
             best = self.retry_stale(unplaced, placed_now)?;
@@ -186,11 +218,11 @@ impl Batch<'_, '_> {
                     p.far && !p.forced && !self.state.unlinked(s)
                 })
                 .collect();
-            for s in last_resort {
+            for &s in &last_resort {
                 self.pending[s].forced = true;
                 self.pending[s].far = false;
-                self.pending[s].cached = Some(self.attempt(s, true)?);
             }
+            self.attempt_all(&last_resort, true)?;
             best = self.best_trusted(unplaced);
         }
         Ok(best)
@@ -217,9 +249,7 @@ impl Batch<'_, '_> {
         stale = by_key.into_iter().map(|(s, _)| s).collect();
         let mut best = None;
         for group in stale.chunks(RETRY_GROUP) {
-            for &s in group {
-                self.try_scan(s, placed_now)?;
-            }
+            self.try_scans(group, placed_now)?;
             best = self.best_trusted(unplaced);
             if best.is_some() {
                 break;

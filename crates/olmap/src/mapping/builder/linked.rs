@@ -29,7 +29,7 @@ impl State<'_> {
     /// Searches scan `s` along the first [`MAX_LINK_SEARCHES`] of `links`: the first
     /// trusted result, or `None` with the untrusted ones offered to `best`.
     pub(super) fn search_links(
-        &mut self,
+        &self,
         s: usize,
         links: &[ScanLink],
         best: &mut Option<Found>,

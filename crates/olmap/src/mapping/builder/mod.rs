@@ -349,7 +349,7 @@ pub fn build_map_linked(
         placed,
         rejected,
         scan_maps: fused.scan_maps,
-        registrations: state.registrations,
+        registrations: state.registrations.into_inner(),
         seconds: start.elapsed().as_secs_f64(),
         entropy_after_scan: fused.entropy_after_scan,
         graph,

@@ -1,9 +1,12 @@
 //! Registering one scan against the map: along its links first ([`super::linked`]), then in
 //! odometry windows that grow, then globally; and the odometry trust test.
 
+use std::sync::atomic::Ordering;
+
 use super::state::State;
+use crate::align::icp::IcpTarget;
 use crate::align::verify::same_solution;
-use crate::align::{register_to_split, Region, RegisterParams, Registration};
+use crate::align::{register_to_prepared, register_to_split, Region, RegisterParams, Registration};
 use crate::error::Result;
 use crate::geometry::Pose;
 use crate::mapping::links::Placement;
@@ -36,7 +39,7 @@ impl State<'_> {
     /// that double twice, then one as wide as the odometry tolerance; a global search only
     /// when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
     /// Without odometry: globally. Returns the best registration and what found it.
-    pub(super) fn register(&mut self, s: usize, allow_global: bool) -> Result<Found> {
+    pub(super) fn register(&self, s: usize, allow_global: bool) -> Result<Found> {
         let mut best: Option<Found> = None;
         let links = self.placed_links(s);
         if let Some(found) = self.search_links(s, &links, &mut best)? {
@@ -121,7 +124,7 @@ impl State<'_> {
 
     /// Registers scan `s` in a window (the first odometry window) around `prior`: the
     /// confirmation of a cached result before the scan joins the map.
-    pub(super) fn register_near(&mut self, s: usize, prior: Pose) -> Result<Registration> {
+    pub(super) fn register_near(&self, s: usize, prior: Pose) -> Result<Registration> {
         let mut params = self.params.register.clone();
         let (xy, z, yaw) = self.params.odometry_window;
         params.search.prior = prior;
@@ -135,13 +138,41 @@ impl State<'_> {
 
     /// One registration of scan `s` against the map (searching with its registration
     /// cloud, refining with the whole scan), counted.
-    pub(super) fn run(&mut self, s: usize, params: &RegisterParams) -> Result<Registration> {
-        self.registrations += 1;
-        register_to_split(
+    pub(super) fn run(&self, s: usize, params: &RegisterParams) -> Result<Registration> {
+        self.registrations.fetch_add(1, Ordering::Relaxed);
+        let Some(icp) = &params.refine else {
+            return register_to_split(
+                &self.clouds[s],
+                &self.scans[s].cloud,
+                &self.target,
+                &self.refine_map,
+                params,
+            );
+        };
+        // The map's points are prepared for ICP once per map, not once per registration
+        // (two registrations in parallel may both prepare them; one copy is kept).
+        let prepared = match self.refine_prepared.get() {
+            Some(p) => p,
+            None => {
+                let p = IcpTarget::new(&self.refine_map, icp)?;
+                self.refine_prepared.get_or_init(|| p)
+            }
+        };
+        if !prepared.prepared_for(icp) {
+            return register_to_split(
+                &self.clouds[s],
+                &self.scans[s].cloud,
+                &self.target,
+                &self.refine_map,
+                params,
+            );
+        }
+        register_to_prepared(
             &self.clouds[s],
             &self.scans[s].cloud,
             &self.target,
             &self.refine_map,
+            prepared,
             params,
         )
     }

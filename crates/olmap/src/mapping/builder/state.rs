@@ -2,8 +2,11 @@
 //! box), the placed poses, and what odometry predicts for an unplaced scan.
 
 use std::borrow::Cow;
+use std::sync::atomic::AtomicUsize;
+use std::sync::OnceLock;
 
 use super::{levels_from_extent, MapParams, ScanInput};
+use crate::align::icp::IcpTarget;
 use crate::align::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -21,8 +24,12 @@ pub(super) struct State<'a> {
     pub(super) team: &'a TeamLinks,
     pub(super) target: SearchTarget,
     pub(super) refine_map: PointCloud,
+    /// `refine_map` prepared for ICP, made when a registration first needs it after the
+    /// map changed.
+    pub(super) refine_prepared: OnceLock<IcpTarget>,
     pub(super) poses: Vec<Option<Pose>>,
-    pub(super) registrations: usize,
+    /// Registrations run (counted by registrations that may run in parallel).
+    pub(super) registrations: AtomicUsize,
     /// Union of the placed scans' footprints.
     pub(super) map_box: Option<Aabb>,
 }
@@ -61,8 +68,9 @@ impl<'a> State<'a> {
             team,
             target: SearchTarget::from_scans(&[], res, levels)?,
             refine_map: PointCloud::new(),
+            refine_prepared: OnceLock::new(),
             poses: vec![None; scans.len()],
-            registrations: 0,
+            registrations: AtomicUsize::new(0),
             map_box: None,
         })
     }
@@ -185,6 +193,7 @@ impl<'a> State<'a> {
         self.refine_map = self
             .refine_map
             .voxel_downsample(self.params.refine_map_voxel)?;
+        self.refine_prepared = OnceLock::new();
         self.poses[s] = Some(pose);
         Ok(())
     }
@@ -217,8 +226,9 @@ mod tests {
             team: &team,
             target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
             refine_map: PointCloud::new(),
+            refine_prepared: OnceLock::new(),
             poses: vec![None; scans.len()],
-            registrations: 0,
+            registrations: AtomicUsize::new(0),
             map_box: None,
         };
         state.poses[0] = Some(Pose::identity());
