@@ -195,7 +195,7 @@ pub fn register_to_split(
     refine_target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
-    register_split_against(
+    register_to_prepared(
         search_source,
         refine_source,
         target,
@@ -206,28 +206,11 @@ pub fn register_to_split(
 }
 
 /// [`register_to_split`] with the refinement's target points already prepared for ICP
-/// (`prepared`, made from `refine_target` with `params.refine`'s target parameters): what
-/// a mapper that registers many scans against one map keeps between registrations. A
-/// target prepared with other parameters is not used (the points are prepared again).
+/// when `prepared` is given (made from `refine_target` with `params.refine`'s target
+/// parameters): what a mapper that registers many scans against one map keeps between
+/// registrations. A target prepared with other parameters is not used (the points are
+/// prepared again).
 pub fn register_to_prepared(
-    search_source: &PointCloud,
-    refine_source: &PointCloud,
-    target: &SearchTarget,
-    refine_target: &PointCloud,
-    prepared: &IcpTarget,
-    params: &RegisterParams,
-) -> Result<Registration> {
-    register_split_against(
-        search_source,
-        refine_source,
-        target,
-        refine_target,
-        Some(prepared),
-        params,
-    )
-}
-
-fn register_split_against(
     search_source: &PointCloud,
     refine_source: &PointCloud,
     target: &SearchTarget,

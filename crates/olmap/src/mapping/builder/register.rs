@@ -6,7 +6,7 @@ use std::sync::atomic::Ordering;
 use super::state::State;
 use crate::align::icp::IcpTarget;
 use crate::align::verify::same_solution;
-use crate::align::{register_to_prepared, register_to_split, Region, RegisterParams, Registration};
+use crate::align::{register_to_prepared, Region, RegisterParams, Registration};
 use crate::error::Result;
 use crate::geometry::Pose;
 use crate::mapping::links::Placement;
@@ -140,33 +140,16 @@ impl State<'_> {
     /// cloud, refining with the whole scan), counted.
     pub(super) fn run(&self, s: usize, params: &RegisterParams) -> Result<Registration> {
         self.registrations.fetch_add(1, Ordering::Relaxed);
-        let Some(icp) = &params.refine else {
-            return register_to_split(
-                &self.clouds[s],
-                &self.scans[s].cloud,
-                &self.target,
-                &self.refine_map,
-                params,
-            );
-        };
         // The map's points are prepared for ICP once per map, not once per registration
         // (two registrations in parallel may both prepare them; one copy is kept).
-        let prepared = match self.refine_prepared.get() {
-            Some(p) => p,
-            None => {
+        let prepared = match (&params.refine, self.refine_prepared.get()) {
+            (None, _) => None,
+            (Some(_), Some(p)) => Some(p),
+            (Some(icp), None) => {
                 let p = IcpTarget::new(&self.refine_map, icp)?;
-                self.refine_prepared.get_or_init(|| p)
+                Some(self.refine_prepared.get_or_init(|| p))
             }
         };
-        if !prepared.prepared_for(icp) {
-            return register_to_split(
-                &self.clouds[s],
-                &self.scans[s].cloud,
-                &self.target,
-                &self.refine_map,
-                params,
-            );
-        }
         register_to_prepared(
             &self.clouds[s],
             &self.scans[s].cloud,
