@@ -209,7 +209,10 @@ pub fn register_to_split(
 /// when `prepared` is given (made from `refine_target` with `params.refine`'s target
 /// parameters): what a mapper that registers many scans against one map keeps between
 /// registrations. A target prepared with other parameters is not used (the points are
-/// prepared again).
+/// prepared again). Without one, ICP runs on the target points near the hypotheses (the
+/// search's poses widened by the refinement's reach); with one, on all the points it was
+/// prepared from: the two agree wherever a correspondence can reach, and may differ by
+/// normals at the crop's edge.
 pub fn register_to_prepared(
     search_source: &PointCloud,
     refine_source: &PointCloud,

@@ -23,10 +23,13 @@
 //! are the same solution and do not count.
 //!
 //! Every hypothesis is refined on the thin source of the ICP schedule
-//! ([`super::icp::IcpParams::coarse_voxel_factor`]), which places a scan to millimetres,
-//! far finer than the voxels the fit counts; only the winner is then refined in full (and
-//! its agreement counted again at its final pose). The target points are prepared for ICP
-//! once for all hypotheses (or kept by the caller: a mapper keeps them per map).
+//! ([`super::icp::IcpParams::coarse_voxel_factor`]) and the winner chosen by those fits;
+//! the winner and the rivals that could be its distinct runner-up are then refined in full
+//! and their agreement counted again at their final poses, so that the uniqueness test
+//! compares fits of one depth (a finished rival that now fits better than the winner makes
+//! the refutation negative, and the verdict doubts the match). The target points are
+//! prepared for ICP once for all hypotheses (or kept by the caller: a mapper keeps them per
+//! map).
 
 use std::time::Instant;
 
@@ -60,7 +63,9 @@ pub const DISTINCT_ROTATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
 pub struct Hypothesis {
     /// The search's pose it started from, with its search score.
     pub start: Candidate,
-    /// Its refinement.
+    /// Its refinement: finished on the full source for the winner and the rivals that
+    /// could be its runner-up; the thin stage's alone (10x the epsilons, statistics of the
+    /// thin source) for the others.
     pub refinement: IcpResult,
     /// The agreement of the two scans at its final pose (refined when converged).
     pub consistency: Consistency,
@@ -90,7 +95,7 @@ impl Hypothesis {
 pub struct Verification {
     /// Every hypothesis refined, the search's best first.
     pub hypotheses: Vec<Hypothesis>,
-    /// Index of the winner (the best fit; the earlier on a tie).
+    /// Index of the winner (the best fit after the thin stage; the earlier on a tie).
     pub chosen: usize,
     /// Index of the distinct runner-up, if a rival ended outside the winner's basin: the
     /// least refuted one ([`Verification::refutation`]).
@@ -240,8 +245,8 @@ pub(super) fn verify(
         Some(b) => points.crop_box(&b),
         None => points.clone(),
     };
-    // Every hypothesis is refined on the thin source (enough to compare fits at the
-    // search's resolution); the winner is then refined in full.
+    // Every hypothesis is refined on the thin source (enough to choose among them at the
+    // search's resolution).
     let thin = IcpSource::new(source, icp)?;
     let mut hypotheses: Vec<Hypothesis> = Vec::new();
     for start in starts {
@@ -252,6 +257,7 @@ pub(super) fn verify(
             &start.pose,
             icp,
             Depth::Coarse,
+            0,
             Instant::now(),
         );
         let at = if refinement.converged {
@@ -280,34 +286,56 @@ pub(super) fn verify(
                 .then(b.cmp(&a))
         })
         .unwrap_or(0);
-    if let Some(w) = hypotheses.get_mut(chosen) {
-        // The winner's refinement goes on from where the thin stage left it, on the full
-        // source: together, what `refine` does from the same start.
-        let mut full = refine_prepared(
-            &thin,
-            prepared,
-            &w.refinement.pose,
-            icp,
-            Depth::Finish,
-            Instant::now(),
-        );
-        full.iterations += w.refinement.iterations;
-        full.seconds += w.refinement.seconds;
-        if (full.pose, full.converged) != (w.refinement.pose, w.refinement.converged) {
-            let at = if full.converged {
-                full.pose
-            } else {
-                w.start.pose
-            };
-            w.consistency = consistency_seen(
+    // The winner, and every rival that could be its distinct runner-up, are finished on
+    // the full source and their agreement recounted, so that the uniqueness compares fits
+    // at one depth. A finished rival that now fits better than the winner makes the
+    // refutation negative: the verdict then doubts the match (the winner is not re-chosen).
+    let thin_won = hypotheses[chosen].pose();
+    let finish: Vec<usize> = (0..hypotheses.len())
+        .filter(|&i| {
+            let p = hypotheses[i].pose();
+            i == chosen || (distinct_poses(&p, &thin_won) && plausible_near(prior, &p, &thin_won))
+        })
+        .collect();
+    for i in finish {
+        let h = &mut hypotheses[i];
+        let full = if h.refinement.converged {
+            // Where the thin stage left it: together, what `refine` does from the start.
+            let mut f = refine_prepared(
+                &thin,
+                prepared,
+                &h.refinement.pose,
+                icp,
+                Depth::Finish,
+                h.refinement.iterations,
+                Instant::now(),
+            );
+            f.iterations += h.refinement.iterations;
+            f.seconds += h.refinement.seconds;
+            f
+        } else {
+            refine_prepared(
+                &thin,
+                prepared,
+                &h.start.pose,
+                icp,
+                Depth::Full,
+                0,
+                Instant::now(),
+            )
+        };
+        let moved = (full.pose, full.converged) != (h.refinement.pose, h.refinement.converged);
+        h.refinement = full;
+        if moved {
+            let at = h.pose();
+            h.consistency = consistency_seen(
                 source,
                 seen.as_ref(),
                 target,
-                Some(&near(&w.start.pose)),
+                Some(&near(&h.start.pose)),
                 &at,
             )?;
-            w.fit = fit(&w.consistency);
-            w.refinement = full;
+            h.fit = fit(&h.consistency);
         }
     }
     let won = hypotheses[chosen].pose();
@@ -315,16 +343,10 @@ pub(super) fn verify(
     // With a prior (a window search), a rival counts only when it is about as near the
     // prior as the winner (within `margin`): the prior makes a look-alike much farther from
     // it unlikely, and ignoring that refused every scan of a room with rows of desks.
-    let plausible = |p: &Pose| {
-        prior.is_none_or(|(at, margin)| {
-            (p.translation() - at.translation()).norm()
-                <= (won.translation() - at.translation()).norm() + margin
-        })
-    };
     let runner_up = (0..hypotheses.len())
         .filter(|&i| {
             let p = hypotheses[i].pose();
-            i != chosen && distinct(&p) && plausible(&p)
+            i != chosen && distinct(&p) && plausible_near(prior, &p, &won)
         })
         .min_by(|&a, &b| {
             let w = &hypotheses[chosen];
@@ -336,6 +358,16 @@ pub(super) fn verify(
         hypotheses,
         chosen,
         runner_up,
+    })
+}
+
+/// Whether pose `p` may be the runner-up of the winner at `won`: always without a prior;
+/// with one (a window search's prior pose and a margin in metres), when `p` is no farther
+/// from the prior than the winner plus the margin.
+fn plausible_near(prior: Option<(&Pose, f64)>, p: &Pose, won: &Pose) -> bool {
+    prior.is_none_or(|(at, margin)| {
+        (p.translation() - at.translation()).norm()
+            <= (won.translation() - at.translation()).norm() + margin
     })
 }
 

@@ -17,7 +17,14 @@
 //!   [`IcpParams::coarse_voxel_factor`] times coarser, to convergence at ten times the
 //!   epsilons; the remaining iterations (usually two or three) and the statistics use the
 //!   source at [`IcpParams::source_voxel`]. Most iterations then cost a ninth as much, and
-//!   the result keeps the precision of the full source.
+//!   the result keeps the precision of the full source. The full source is reserved a fifth
+//!   of [`IcpParams::max_iterations`] (no thin stage below five iterations).
+//! * **Extrapolation** (Besl & McKay 1992, "accelerated ICP"). When two consecutive updates
+//!   at the same distance point within about 18° of each other (in the centred, scaled
+//!   coordinates below) and the second is `r < 1` times the first, the estimate moves by
+//!   `min(1 / (1 - r), 4)` times the update: the sum of the geometric series the steps are
+//!   following. Never twice in a row; the trust region applies after it; convergence and
+//!   settling are judged on the plain update. The fixed point is unchanged.
 //! * **Target normals.** The target's own normals are used when it has them; otherwise each
 //!   target point's normal (computed when a correspondence first needs it, then kept) is the
 //!   eigenvector of the smallest eigenvalue of the covariance of
@@ -80,6 +87,8 @@
 //!   registration*, UNC TR04-004, 2004.
 //! * J. Zhang, M. Kaess, S. Singh, *On degeneracy of optimization-based state estimation
 //!   problems*, ICRA 2016.
+//! * P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE PAMI 14(2),
+//!   1992 (the accelerated ICP).
 
 mod degeneracy;
 mod params;
@@ -237,7 +246,7 @@ pub(crate) enum Depth {
     /// hypotheses at the search's resolution.
     Coarse,
     /// The full source alone from the final distance: what [`Depth::Full`] adds to a
-    /// [`Depth::Coarse`] result (start from its pose).
+    /// converged [`Depth::Coarse`] result (start from its pose).
     Finish,
 }
 
@@ -266,18 +275,22 @@ fn refine_from(
         initial,
         params,
         Depth::Full,
+        0,
         started,
     ))
 }
 
 /// [`refine_to`] with the source prepared too (parameters and initial pose already
-/// checked), to `depth`.
+/// checked), to `depth`; `spent` iterations were already spent on this refinement (by the
+/// [`Depth::Coarse`] run a [`Depth::Finish`] continues; 0 otherwise): the stages together
+/// run at most [`IcpParams::max_iterations`].
 pub(crate) fn refine_prepared(
     src: &IcpSource,
     target: &IcpTarget,
     initial: &Pose,
     params: &IcpParams,
     depth: Depth,
+    spent: usize,
     started: Instant,
 ) -> IcpResult {
     let tgt = target.inner.as_ref();
@@ -285,39 +298,55 @@ pub(crate) fn refine_prepared(
     let mut converged = false;
     let mut iterations = 0;
     let thin = src.coarse.as_ref();
-    let mut stopped = false;
     let last: &Source = match depth {
         Depth::Coarse => thin.unwrap_or(&src.fine),
         Depth::Full | Depth::Finish => &src.fine,
     };
+    // The full source's last iterations are reserved a fifth of the budget (with fewer
+    // than five iterations there is no thin stage).
+    let reserve = params.max_iterations / 5;
     if let (Some(tgt), false) = (tgt, src.fine.points.is_empty()) {
-        let mut d = match depth {
-            Depth::Finish => params.max_distance_end,
-            Depth::Full | Depth::Coarse => params.max_distance_start,
-        };
-        let first = match depth {
-            Depth::Finish => None,
-            Depth::Full | Depth::Coarse => Some(thin.unwrap_or(&src.fine)),
-        };
-        if let Some(first) = first {
+        if depth == Depth::Finish {
+            let budget = params.max_iterations.saturating_sub(spent).max(1);
             let s = schedule(
-                first,
+                &src.fine,
                 tgt,
                 pose,
-                d,
+                params.max_distance_end,
                 params,
-                COARSE_EPSILON_FACTOR,
+                1.0,
+                budget,
+            );
+            (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
+        } else if depth == Depth::Full && reserve == 0 {
+            let s = schedule(
+                &src.fine,
+                tgt,
+                pose,
+                params.max_distance_start,
+                params,
+                1.0,
                 params.max_iterations,
             );
-            (pose, d, converged, iterations) = (s.pose, s.d, s.converged, s.iterations);
-            stopped = s.stopped;
-        }
-        // A first stage that found too few correspondences (or no solution) ends it.
-        if depth != Depth::Coarse && !stopped {
-            let budget = params.max_iterations.saturating_sub(iterations).max(1);
-            let s = schedule(&src.fine, tgt, pose, d, params, 1.0, budget);
-            (pose, converged) = (s.pose, s.converged);
-            iterations += s.iterations;
+            (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
+        } else {
+            let first = schedule(
+                thin.unwrap_or(&src.fine),
+                tgt,
+                pose,
+                params.max_distance_start,
+                params,
+                COARSE_EPSILON_FACTOR,
+                params.max_iterations - reserve,
+            );
+            (pose, converged, iterations) = (first.pose, first.converged, first.iterations);
+            // A first stage that found too few correspondences (or no solution) ends it.
+            if depth == Depth::Full && !first.stopped {
+                let budget = params.max_iterations - iterations;
+                let s = schedule(&src.fine, tgt, pose, first.d, params, 1.0, budget);
+                (pose, converged) = (s.pose, s.converged);
+                iterations += s.iterations;
+            }
         }
     }
 

@@ -175,6 +175,9 @@ impl Batch<'_, '_> {
     /// cached one (the first error, in `list` order, is returned after all ran).
     fn attempt_all(&mut self, list: &[usize], allow_global: bool) -> Result<()> {
         let state = &*self.state;
+        if let (Some(icp), false) = (&state.params.register.refine, list.is_empty()) {
+            state.prepared_map(icp)?;
+        }
         let found: Vec<Result<Candidate>> = list
             .par_iter()
             .map(|&s| attempt(state, s, allow_global))

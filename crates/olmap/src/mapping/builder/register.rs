@@ -4,7 +4,7 @@
 use std::sync::atomic::Ordering;
 
 use super::state::State;
-use crate::align::icp::IcpTarget;
+use crate::align::icp::{IcpParams, IcpTarget};
 use crate::align::verify::same_solution;
 use crate::align::{register_to_prepared, Region, RegisterParams, Registration};
 use crate::error::Result;
@@ -136,19 +136,24 @@ impl State<'_> {
         Ok(r)
     }
 
+    /// The map's points prepared for ICP with `icp`'s target parameters: once per map, not
+    /// once per registration. (Registrations in parallel that find it missing may each
+    /// prepare it and keep one copy: the batch mapper prepares it before a parallel round.)
+    pub(super) fn prepared_map(&self, icp: &IcpParams) -> Result<&IcpTarget> {
+        if let Some(p) = self.refine_prepared.get() {
+            return Ok(p);
+        }
+        let p = IcpTarget::new(&self.refine_map, icp)?;
+        Ok(self.refine_prepared.get_or_init(|| p))
+    }
+
     /// One registration of scan `s` against the map (searching with its registration
     /// cloud, refining with the whole scan), counted.
     pub(super) fn run(&self, s: usize, params: &RegisterParams) -> Result<Registration> {
         self.registrations.fetch_add(1, Ordering::Relaxed);
-        // The map's points are prepared for ICP once per map, not once per registration
-        // (two registrations in parallel may both prepare them; one copy is kept).
-        let prepared = match (&params.refine, self.refine_prepared.get()) {
-            (None, _) => None,
-            (Some(_), Some(p)) => Some(p),
-            (Some(icp), None) => {
-                let p = IcpTarget::new(&self.refine_map, icp)?;
-                Some(self.refine_prepared.get_or_init(|| p))
-            }
+        let prepared = match &params.refine {
+            Some(icp) => Some(self.prepared_map(icp)?),
+            None => None,
         };
         register_to_prepared(
             &self.clouds[s],
