@@ -22,8 +22,9 @@
 //! ([`super::verdict`]). Rivals that the refinement brings back into the winner's basin
 //! are the same solution and do not count.
 //!
-//! Every hypothesis is refined on the thin source of the ICP schedule
-//! ([`super::icp::IcpParams::coarse_voxel_factor`]) and the winner chosen by those fits;
+//! Every hypothesis is refined to the ICP schedule's loose first stage (ten times its
+//! epsilons, on the thin source when [`super::icp::IcpParams::coarse_voxel_factor`] asks for
+//! one) and the winner chosen by those fits;
 //! the winner and the rivals that could be its distinct runner-up are then refined in full
 //! and their agreement counted again at their final poses, so that the uniqueness test
 //! compares fits of one depth (a finished rival that now fits better than the winner makes

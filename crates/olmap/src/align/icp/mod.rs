@@ -13,12 +13,11 @@
 //!   density of scanners, which is very high near the sensor, and bounds the cost. A k-d tree
 //!   ([`kiddo`]) is built once over the target points. [`IcpTarget`] keeps a prepared
 //!   target for many refinements ([`refine_to`]).
-//! * **Thin, then full source.** The schedule first runs on the source downsampled
-//!   [`IcpParams::coarse_voxel_factor`] times coarser, to convergence at ten times the
-//!   epsilons; the remaining iterations (usually two or three) and the statistics use the
-//!   source at [`IcpParams::source_voxel`]. Most iterations then cost a ninth as much, and
-//!   the result keeps the precision of the full source. The full source is reserved a fifth
-//!   of [`IcpParams::max_iterations`] (no thin stage below five iterations).
+//! * **Loose, then tight.** The schedule first runs to convergence at ten times the
+//!   epsilons, optionally on a source downsampled [`IcpParams::coarse_voxel_factor`] times
+//!   coarser (off by default), then continues on the source at [`IcpParams::source_voxel`]
+//!   to the epsilons; the statistics use that source. The last stage is reserved a fifth of
+//!   [`IcpParams::max_iterations`] (below five iterations there is one stage).
 //! * **Extrapolation** (Besl & McKay 1992, "accelerated ICP"). When two consecutive updates
 //!   at the same distance point within about 18° of each other (in the centred, scaled
 //!   coordinates below) and the second is `r < 1` times the first, the estimate moves by
@@ -971,7 +970,10 @@ mod tests {
     fn the_thin_stage_ends_where_the_full_source_alone_ends() {
         let truth = Pose::from_xyz_ypr(0.2, 0.15, 0.03, 0.1, 0.02, -0.01);
         let (source, target) = scene_pair(&structured_scene(), &truth, 0.01, 3);
-        let thin = IcpParams::default();
+        let thin = IcpParams {
+            coarse_voxel_factor: 3.0,
+            ..Default::default()
+        };
         let full_only = IcpParams {
             coarse_voxel_factor: 1.0,
             ..Default::default()
