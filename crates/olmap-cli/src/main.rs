@@ -46,6 +46,9 @@ enum Command {
     /// ROS 2 bags (rosbag2 folders, .mcap files): list topics and frames, extract scans with
     /// their odometry into a folder `olmap map` reads.
     Bag(commands::bag::BagArgs),
+    /// Compare two OctoMap .bt trees voxel by voxel: voxels both know, and how many they
+    /// classify alike (free / occupied).
+    CompareBt(commands::compare_bt::CompareBtArgs),
     /// Merge maps of the same resolution (counts add).
     Merge(commands::merge::MergeArgs),
     /// Register a scan onto another scan with no initial guess (multi-resolution search,
@@ -149,6 +152,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => commands::eval::run(&a),
         Command::Align(a) | Command::Localize(a) => commands::align::run(&a),
         Command::Voxelize(a) => commands::voxelize::run(&a),
+        Command::CompareBt(a) => commands::compare_bt::run(&a),
         Command::Export(a) => commands::export::run(&a),
         Command::Merge(a) => commands::merge::run(&a),
         Command::Bag(a) => commands::bag::run(&a),

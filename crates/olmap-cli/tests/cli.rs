@@ -443,6 +443,115 @@ fn octomap_bt_read_write_and_octomap_accepts_ours() {
 }
 
 #[test]
+fn free_space_map_matches_octomap_on_a_real_scan() {
+    let Some(d) = data() else { return };
+    let scan = d.join("octomap_share_data/scan.dat");
+    let dir = tempfile::tempdir().unwrap();
+    let ours = dir.path().join("free.bt");
+    let graph = dir.path().join("scan.graph");
+    // A .olm cannot hold free space: refused, nothing written.
+    let olm = dir.path().join("free.olm");
+    let out = olmap(&[
+        "voxelize",
+        "--free-space",
+        scan.to_str().unwrap(),
+        "-o",
+        olm.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains(".bt"));
+    assert!(!olm.exists());
+    let v = json(&olmap(&[
+        "voxelize",
+        "--free-space",
+        "--json",
+        "--resolution",
+        "0.1",
+        scan.to_str().unwrap(),
+        "-o",
+        ours.to_str().unwrap(),
+        "--scan-graph",
+        graph.to_str().unwrap(),
+    ]));
+    // Data README §2.3: 88,206 finite points, ranges 0.47-29.05 m. Every ray ends in an
+    // occupied voxel (no maximum range by default) and crosses free ones.
+    let n = |k: &str| v[k].as_u64().unwrap();
+    assert_eq!(n("points"), 88_206);
+    assert_eq!(v["insertion"]["truncated"], 0);
+    assert!(n("occupied") > 0 && n("occupied") <= 88_206);
+    assert!(n("free") > 10 * n("occupied"));
+    assert_eq!(n("voxels"), n("free") + n("occupied"));
+    assert!(v["max_range"].is_null());
+    let own = json(&olmap(&[
+        "compare-bt",
+        "--json",
+        ours.to_str().unwrap(),
+        ours.to_str().unwrap(),
+    ]));
+    assert_eq!(own["both_known"].as_u64(), Some(n("voxels")));
+    assert_eq!(own["agreement"], 1.0);
+    // OctoMap itself on the same scan (Debian octomap-tools, installed by .ci/run when
+    // possible): the acceptance is >= 99 % agreement on voxels both know.
+    let theirs = dir.path().join("octomap.bt");
+    match Command::new("graph2tree")
+        .args([
+            "-i",
+            graph.to_str().unwrap(),
+            "-o",
+            theirs.to_str().unwrap(),
+            "-res",
+            "0.1",
+        ])
+        .output()
+    {
+        Ok(out) => {
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let c = json(&olmap(&[
+                "compare-bt",
+                "--json",
+                ours.to_str().unwrap(),
+                theirs.to_str().unwrap(),
+            ]));
+            let both = c["both_known"].as_u64().unwrap();
+            assert!(c["agreement"].as_f64().unwrap() >= 0.99, "{c}");
+            assert!(both as f64 >= 0.99 * n("voxels") as f64, "{c}");
+            assert!(
+                both as f64 >= 0.99 * c["known_there"].as_u64().unwrap() as f64,
+                "{c}"
+            );
+            // OctoMap reads our tree with its free nodes, node for node.
+            let ot = dir.path().join("free.ot");
+            let out = Command::new("convert_octree")
+                .arg(&ours)
+                .arg(&ot)
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let cmp = Command::new("compare_octrees")
+                .arg(&ot)
+                .arg(&ot)
+                .output()
+                .unwrap();
+            let text = String::from_utf8_lossy(&cmp.stdout).to_string()
+                + &String::from_utf8_lossy(&cmp.stderr);
+            assert!(
+                text.contains(&format!("Done ({} nodes)", v["bt_nodes"])),
+                "{text}"
+            );
+        }
+        Err(_) => eprintln!("octomap-tools not installed: the OctoMap cross-check is skipped"),
+    }
+}
+
+#[test]
 fn align_json_and_localize_in_a_map() {
     let Some(d) = data() else { return };
     let s0 = d.join("3dtk_dat/scan000.3d");

@@ -5,6 +5,7 @@ pub mod align;
 pub mod bag;
 pub mod beacons;
 pub mod bench;
+pub mod compare_bt;
 pub mod convert;
 pub mod demo;
 pub mod eval;

@@ -35,10 +35,13 @@
 //! 32768 and a map spans `[-32768 res, 32768 res)` metres per axis.
 //!
 //! [`read()`] returns the occupied leaves expanded to voxels of the tree resolution (free
-//! leaves are only counted), with a caller-given limit on the expanded count. [`write()`]
+//! leaves are only counted), with a caller-given limit on the expanded count;
+//! [`read_leaves()`] keeps occupied and free leaves unexpanded, and
+//! [`BtLeaves::compare`] compares two trees' classification voxel by voxel. [`write()`]
 //! writes a set of occupied voxels as a maximally pruned tree: any node whose eight
-//! children are all occupied becomes one occupied leaf, recursively. Writing keeps no free
-//! space: a `.bt` file written by olmap marks everything not occupied as unknown.
+//! children are all occupied becomes one occupied leaf, recursively; everything else is
+//! unknown. [`write_classified()`] writes free voxels too (a log-odds map's
+//! [`crate::occupancy::LogOddsMap::write_bt`]), pruned the same way per state.
 
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -81,6 +84,15 @@ pub struct BtStats {
     pub occupied_leaves_by_depth: [u64; 17],
 }
 
+impl BtStats {
+    /// The voxels of the tree's resolution its occupied and free leaves stand for.
+    pub fn known_voxels(&self, leaves: &BtLeaves) -> u64 {
+        leaves
+            .expanded_voxels()
+            .saturating_add(leaves.free_voxels())
+    }
+}
+
 /// An OctoMap tree read from a `.bt` file: its occupied voxels.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BtTree {
@@ -102,8 +114,7 @@ struct Header {
     data_start: u64,
 }
 
-/// An occupied leaf: its depth and its key prefix (the top `depth` bits of the OctoMap key)
-/// per axis.
+/// A leaf: its depth and its key prefix (the top `depth` bits of the OctoMap key) per axis.
 #[derive(Debug, Clone, Copy)]
 struct Leaf {
     depth: u32,
@@ -115,6 +126,19 @@ impl Leaf {
     fn corner_and_edge(&self) -> ([u32; 3], u32) {
         let shift = TREE_DEPTH - self.depth;
         (self.prefix.map(|p| p << shift), 1 << shift)
+    }
+
+    /// The voxels of the tree's resolution the leaf stands for.
+    fn volume(&self) -> u64 {
+        1u64 << (3 * (TREE_DEPTH - self.depth))
+    }
+
+    /// The leaf as a range of Morton codes (see [`morton`]): a leaf's voxels are exactly
+    /// the codes from its corner's code on, as many as its volume.
+    fn morton_range(&self) -> (u64, u64) {
+        let (corner, _) = self.corner_and_edge();
+        let start = morton(corner.map(|c| c as u16));
+        (start, start + self.volume())
     }
 }
 
@@ -170,7 +194,7 @@ fn unpack(p: u64) -> VoxelKey {
 }
 
 /// A `.bt` tree parsed but not expanded: its resolution, what it holds, and its occupied
-/// leaves (at any depth). [`BtLeaves::expanded_voxels_within`] says what expanding them
+/// and free leaves (at any depth). [`BtLeaves::expanded_voxels_within`] says what expanding them
 /// would cost before anything is allocated; [`BtLeaves::for_each_voxel`] expands them.
 #[derive(Debug, Clone)]
 pub struct BtLeaves {
@@ -179,15 +203,95 @@ pub struct BtLeaves {
     /// What the file's tree holds.
     pub stats: BtStats,
     leaves: Vec<Leaf>,
+    free: Vec<Leaf>,
 }
 
 impl BtLeaves {
     /// The voxels the occupied leaves expand to (an occupied leaf at depth `d` is
     /// `8^(16-d)` voxels).
     pub fn expanded_voxels(&self) -> u64 {
-        self.leaves.iter().fold(0u64, |sum, l| {
-            sum.saturating_add(1u64 << (3 * (TREE_DEPTH - l.depth)))
-        })
+        self.leaves
+            .iter()
+            .fold(0u64, |sum, l| sum.saturating_add(l.volume()))
+    }
+
+    /// The voxels the free leaves stand for (never expanded).
+    pub fn free_voxels(&self) -> u64 {
+        self.free
+            .iter()
+            .fold(0u64, |sum, l| sum.saturating_add(l.volume()))
+    }
+
+    /// Compares the classification of two trees of one resolution voxel by voxel, without
+    /// expanding either (a sweep over their leaves in Morton order, linear in the leaves).
+    /// Trees of different resolutions are [`crate::Error::InvalidArgument`].
+    ///
+    /// ```
+    /// use olmap::geometry::VoxelKey;
+    /// use olmap::io::octomap_bt;
+    /// let (a, b) = (VoxelKey::new(0, 0, 0), VoxelKey::new(1, 0, 0));
+    /// let mut one = Vec::new();
+    /// octomap_bt::write_classified(&mut one, 0.1, [(a, true), (b, false)]).unwrap();
+    /// let mut two = Vec::new();
+    /// octomap_bt::write_classified(&mut two, 0.1, [(a, true), (b, true)]).unwrap();
+    /// let one = octomap_bt::read_leaves(&one[..]).unwrap();
+    /// let two = octomap_bt::read_leaves(&two[..]).unwrap();
+    /// let c = one.compare(&two).unwrap();
+    /// assert_eq!((c.both_known, c.agree, c.free_here_occupied_there), (2, 1, 1));
+    /// assert_eq!(c.agreement(), 0.5);
+    /// ```
+    pub fn compare(&self, other: &BtLeaves) -> crate::Result<BtComparison> {
+        if self.resolution != other.resolution {
+            return Err(crate::Error::InvalidArgument(format!(
+                "trees of different resolutions ({} m and {} m) cannot be compared voxel by voxel",
+                self.resolution, other.resolution
+            )));
+        }
+        let a = self.ranges();
+        let b = other.ranges();
+        let mut c = BtComparison {
+            resolution: self.resolution,
+            known_here: a.iter().map(|r| r.1 - r.0).sum(),
+            known_there: b.iter().map(|r| r.1 - r.0).sum(),
+            ..BtComparison::default()
+        };
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            let ((sa, ea, oa), (sb, eb, ob)) = (a[i], b[j]);
+            let overlap = ea.min(eb).saturating_sub(sa.max(sb));
+            if overlap > 0 {
+                c.both_known += overlap;
+                match (oa, ob) {
+                    (true, true) => c.occupied_both += overlap,
+                    (false, false) => c.free_both += overlap,
+                    (true, false) => c.occupied_here_free_there += overlap,
+                    (false, true) => c.free_here_occupied_there += overlap,
+                }
+            }
+            if ea <= eb {
+                i += 1;
+            } else {
+                j += 1;
+            }
+        }
+        c.agree = c.occupied_both + c.free_both;
+        Ok(c)
+    }
+
+    /// Every leaf as a Morton range with its state (occupied = true), sorted.
+    fn ranges(&self) -> Vec<(u64, u64, bool)> {
+        let mut r: Vec<(u64, u64, bool)> = self
+            .leaves
+            .iter()
+            .map(|l| (l, true))
+            .chain(self.free.iter().map(|l| (l, false)))
+            .map(|(l, occ)| {
+                let (s, e) = l.morton_range();
+                (s, e, occ)
+            })
+            .collect();
+        r.sort_unstable();
+        r
     }
 
     /// [`BtLeaves::expanded_voxels`], or [`ParseError::TooLarge`] naming the expansion
@@ -235,14 +339,57 @@ impl BtLeaves {
 }
 
 /// Reads a `.bt` OctoMap tree from a stream without expanding it: memory in proportion to
-/// the file, whatever its leaves stand for. Errors as for [`read()`], but for the limit.
+/// the file (16 bytes per leaf), whatever its leaves stand for. Errors as for [`read()`],
+/// but for the limit.
 pub fn read_leaves<R: BufRead>(reader: R) -> Result<BtLeaves, ParseError> {
-    let (header, stats, leaves) = parse(reader)?;
+    let (header, stats, leaves, free) = parse(reader)?;
     Ok(BtLeaves {
         resolution: header.resolution,
         stats,
         leaves,
+        free,
     })
+}
+
+/// How two trees classify the voxels of one resolution ([`BtLeaves::compare`]); counts are
+/// voxels of that resolution ("here" is the tree `compare` was called on).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BtComparison {
+    /// The trees' voxel edge, metres.
+    pub resolution: f64,
+    /// Voxels known (free or occupied) in this tree.
+    pub known_here: u64,
+    /// Voxels known in the other tree.
+    pub known_there: u64,
+    /// Voxels known in both.
+    pub both_known: u64,
+    /// Voxels known in both with the same state.
+    pub agree: u64,
+    /// Occupied in both.
+    pub occupied_both: u64,
+    /// Free in both.
+    pub free_both: u64,
+    /// Occupied here, free there.
+    pub occupied_here_free_there: u64,
+    /// Free here, occupied there.
+    pub free_here_occupied_there: u64,
+}
+
+impl BtComparison {
+    /// The fraction of the voxels known to both trees that they classify alike (1 when
+    /// none is known to both).
+    pub fn agreement(&self) -> f64 {
+        if self.both_known == 0 {
+            1.0
+        } else {
+            self.agree as f64 / self.both_known as f64
+        }
+    }
+}
+
+/// Reads a `.bt` OctoMap tree from a file without expanding it; see [`read_leaves()`].
+pub fn read_leaves_path(path: &Path) -> crate::Result<BtLeaves> {
+    crate::file::parse_file(path, "OctoMap .bt", read_leaves)
 }
 
 /// Reads a `.bt` OctoMap tree from a file; see [`read()`].
@@ -250,8 +397,11 @@ pub fn read_path(path: &Path, max_voxels: usize) -> crate::Result<BtTree> {
     crate::file::parse_file(path, "OctoMap .bt", |r| read(r, max_voxels))
 }
 
-/// Parses header and body, returning the occupied leaves unexpanded.
-fn parse<R: BufRead>(mut reader: R) -> Result<(Header, BtStats, Vec<Leaf>), ParseError> {
+/// The occupied and the free leaves of a tree, unexpanded.
+type Parsed = (Header, BtStats, Vec<Leaf>, Vec<Leaf>);
+
+/// Parses header and body, returning the occupied and the free leaves unexpanded.
+fn parse<R: BufRead>(mut reader: R) -> Result<Parsed, ParseError> {
     let header = parse_header(&mut reader)?;
     let mut body = Body {
         r: reader,
@@ -259,8 +409,9 @@ fn parse<R: BufRead>(mut reader: R) -> Result<(Header, BtStats, Vec<Leaf>), Pars
     };
     let mut stats = BtStats::default();
     let mut leaves = Vec::new();
+    let mut free = Vec::new();
     if header.size > 0 {
-        parse_tree(&mut body, header.size, &mut stats, &mut leaves)?;
+        parse_tree(&mut body, header.size, &mut stats, &mut leaves, &mut free)?;
     }
     let end = body.offset;
     let rest = body.count_rest()?;
@@ -284,7 +435,7 @@ fn parse<R: BufRead>(mut reader: R) -> Result<(Header, BtStats, Vec<Leaf>), Pars
             header.size, stats.nodes
         )));
     }
-    Ok((header, stats, leaves))
+    Ok((header, stats, leaves, free))
 }
 
 /// The single value of a keyword line, or an error naming the keyword and what it expects.
@@ -544,6 +695,7 @@ fn parse_tree<R: BufRead>(
     size: u64,
     stats: &mut BtStats,
     leaves: &mut Vec<Leaf>,
+    free: &mut Vec<Leaf>,
 ) -> Result<(), ParseError> {
     let at = body.offset;
     let bits = body.inner_node(|| "the root node".to_string())?;
@@ -581,7 +733,10 @@ fn parse_tree<R: BufRead>(
         }
         stats.nodes += 1;
         match code {
-            0b01 => stats.free_leaves += 1,
+            0b01 => {
+                stats.free_leaves += 1;
+                free.push(Leaf { depth, prefix });
+            }
             0b10 => {
                 stats.occupied_leaves += 1;
                 stats.occupied_leaves_by_depth[depth as usize] += 1;
@@ -634,10 +789,20 @@ fn parse_tree<R: BufRead>(
 ///
 /// The header is `# Octomap OcTree binary file`, `# (written by olmap)`, `id OcTree`,
 /// `size <nodes>`, `res <resolution>` (shortest exact decimal), `data`.
-pub fn write<W: Write>(
+pub fn write<W: Write>(w: W, resolution: f64, occupied: &[VoxelKey]) -> std::io::Result<BtStats> {
+    write_classified(w, resolution, occupied.iter().map(|k| (*k, true)))
+}
+
+/// Writes voxels that are occupied (`true`) or free (`false`) as a `.bt` OctoMap tree and
+/// returns what the tree holds: the maximum-likelihood tree OctoMap writes, maximally
+/// pruned (a node whose eight children are leaves of one state is written as one leaf of
+/// that state, recursively; the root is always an inner node). Voxels not given are
+/// unknown. A voxel given twice is occupied if either says so. Key range, resolution and
+/// errors as for [`write()`]. Memory: 8 bytes per voxel.
+pub fn write_classified<W: Write>(
     mut w: W,
     resolution: f64,
-    occupied: &[VoxelKey],
+    voxels: impl IntoIterator<Item = (VoxelKey, bool)>,
 ) -> std::io::Result<BtStats> {
     if !(resolution.is_finite() && resolution > 0.0) {
         return Err(std::io::Error::new(
@@ -645,9 +810,10 @@ pub fn write<W: Write>(
             format!("OctoMap resolution {resolution}: expected a positive finite number of metres"),
         ));
     }
-    let mut codes = Vec::with_capacity(occupied.len());
-    for k in occupied {
-        let key = octomap_key(k).ok_or_else(|| {
+    let voxels = voxels.into_iter();
+    let mut codes = Vec::with_capacity(voxels.size_hint().0);
+    for (k, occupied) in voxels {
+        let key = octomap_key(&k).ok_or_else(|| {
             let lo = -f64::from(KEY_OFFSET) * resolution;
             let hi = f64::from(KEY_OFFSET) * resolution;
             std::io::Error::new(
@@ -659,10 +825,18 @@ pub fn write<W: Write>(
                 ),
             )
         })?;
-        codes.push(morton(key));
+        // The state in the lowest bit: sorted codes stay in Morton order.
+        codes.push(morton(key) << 1 | u64::from(occupied));
     }
     codes.sort_unstable();
-    codes.dedup();
+    // `a` is dropped when it has `b`'s key; `b` keeps "occupied" if either had it.
+    codes.dedup_by(|a, b| {
+        let same = *a >> 1 == *b >> 1;
+        if same {
+            *b |= *a & 1;
+        }
+        same
+    });
     let mut stats = BtStats::default();
     // Worst case 2 bytes per inner node; a few inner nodes per voxel at most near the root,
     // usually far fewer.
@@ -678,6 +852,21 @@ pub fn write<W: Write>(
     w.write_all(header.as_bytes())?;
     w.write_all(&body)?;
     Ok(stats)
+}
+
+/// Writes classified voxels as a `.bt` OctoMap tree file; see [`write_classified()`]. The
+/// file appears complete or not at all.
+pub fn write_classified_path(
+    path: &Path,
+    resolution: f64,
+    voxels: impl IntoIterator<Item = (VoxelKey, bool)>,
+) -> crate::Result<BtStats> {
+    let mut stats = None;
+    crate::file::write_atomic(path, "OctoMap .bt", |w| {
+        stats = Some(write_classified(w, resolution, voxels)?);
+        Ok(())
+    })?;
+    Ok(stats.unwrap_or_default())
 }
 
 /// Writes a set of occupied voxels as a `.bt` OctoMap tree file; see [`write()`]. The file
@@ -710,13 +899,15 @@ fn morton(key: [u16; 3]) -> u64 {
     m
 }
 
-/// Writes the inner node at `depth` covering the sorted, distinct `codes` (all sharing its
+/// Writes the inner node at `depth` covering the sorted `codes` (Morton code shifted left
+/// by one, the lowest bit set for occupied; distinct Morton codes; all sharing the node's
 /// prefix), then the subtrees of its inner children. Recursion is at most 16 deep.
 fn write_inner(codes: &[u64], depth: u32, out: &mut Vec<u8>, stats: &mut BtStats) {
     let child_depth = depth + 1;
-    let shift = 3 * (TREE_DEPTH - child_depth);
-    // A child cube holds 8^(16 - child_depth) voxels; all present means occupied leaf.
-    let full = 1u64 << shift;
+    let shift = 3 * (TREE_DEPTH - child_depth) + 1;
+    // A child cube holds 8^(16 - child_depth) voxels; all present and of one state make
+    // a leaf of that state.
+    let full = 1u64 << (shift - 1);
     let mut groups: [&[u64]; 8] = [&[]; 8];
     let mut rest = codes;
     for (i, group) in groups.iter_mut().enumerate() {
@@ -730,10 +921,14 @@ fn write_inner(codes: &[u64], depth: u32, out: &mut Vec<u8>, stats: &mut BtStats
             continue;
         }
         stats.nodes += 1;
-        let code = if group.len() as u64 == full {
+        let occupied = group.iter().filter(|&&c| c & 1 == 1).count();
+        let code = if group.len() as u64 == full && occupied == group.len() {
             stats.occupied_leaves += 1;
             stats.occupied_leaves_by_depth[child_depth as usize] += 1;
             0b10
+        } else if group.len() as u64 == full && occupied == 0 {
+            stats.free_leaves += 1;
+            0b01
         } else {
             inner[i] = true;
             0b11
@@ -820,7 +1015,7 @@ mod tests {
 
         // Occupied-leaf centres (README §2.4): x -7.96..30.92, y -7.48..7.40, z -0.28..2.76.
         let expected = [[-7.96, 30.92], [-7.48, 7.40], [-0.28, 2.76]];
-        let (_, _, leaves) = parse(&std::fs::read(&path).unwrap()[..]).unwrap();
+        let (_, _, leaves, _) = parse(&std::fs::read(&path).unwrap()[..]).unwrap();
         let bounds = |centres: &mut dyn Iterator<Item = [f64; 3]>| {
             let mut b = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
             for c in centres {

@@ -138,33 +138,51 @@ pub fn read<R: BufRead>(reader: R) -> Result<LoadedCloud, ParseError> {
 
 /// Writes a cloud as a one-node ScanGraph: the node sits at the cloud's sensor origin with
 /// identity rotation, and holds the points relative to it.
-pub fn write<W: Write>(mut w: W, cloud: &PointCloud) -> std::io::Result<()> {
-    let o = cloud.origin();
-    let mut out = Vec::with_capacity(8 + cloud.len() * 28 + 80);
+pub fn write<W: Write>(w: W, cloud: &PointCloud) -> std::io::Result<()> {
+    write_nodes(w, [(Pose::identity(), cloud)])
+}
+
+/// Writes clouds with their poses `T_world_scan` as a ScanGraph without edges (what
+/// OctoMap's `graph2tree` inserts): node `i` (id `i`) sits at the pose of the cloud's
+/// sensor origin, `T_world_scan * translation(origin)`, and holds the points relative to
+/// that origin.
+pub fn write_nodes<'a, W: Write>(
+    mut w: W,
+    clouds: impl IntoIterator<Item = (Pose, &'a PointCloud)>,
+) -> std::io::Result<()> {
+    let clouds: Vec<(Pose, &PointCloud)> = clouds.into_iter().collect();
     let vec3 = |out: &mut Vec<u8>, v: [f64; 3]| {
         out.extend_from_slice(&3i32.to_le_bytes());
         for x in v {
             out.extend_from_slice(&x.to_le_bytes());
         }
     };
-    out.extend_from_slice(&1u32.to_le_bytes());
-    let n =
-        u32::try_from(cloud.len()).map_err(|_| std::io::Error::other("more than 2^32 points"))?;
-    out.extend_from_slice(&n.to_le_bytes());
-    for p in cloud.points() {
-        vec3(
-            &mut out,
-            [p.x as f64 - o.x, p.y as f64 - o.y, p.z as f64 - o.z],
-        );
+    let count = |n: usize, what: &str| {
+        u32::try_from(n).map_err(|_| std::io::Error::other(format!("more than 2^32 {what}")))
+    };
+    w.write_all(&count(clouds.len(), "clouds")?.to_le_bytes())?;
+    for (id, (pose, cloud)) in clouds.iter().enumerate() {
+        let o = cloud.origin();
+        let mut out = Vec::with_capacity(8 + cloud.len() * 28 + 80);
+        out.extend_from_slice(&count(cloud.len(), "points")?.to_le_bytes());
+        for p in cloud.points() {
+            vec3(
+                &mut out,
+                [p.x as f64 - o.x, p.y as f64 - o.y, p.z as f64 - o.z],
+            );
+        }
+        let node = pose * &Pose::from_parts(o.coords, UnitQuaternion::identity());
+        let t = node.translation();
+        vec3(&mut out, [t.x, t.y, t.z]);
+        let q = node.rotation();
+        out.extend_from_slice(&4i32.to_le_bytes());
+        for x in [q.w, q.i, q.j, q.k] {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        out.extend_from_slice(&count(id, "clouds")?.to_le_bytes());
+        w.write_all(&out)?;
     }
-    vec3(&mut out, [o.x, o.y, o.z]);
-    out.extend_from_slice(&4i32.to_le_bytes());
-    for x in [1.0f64, 0.0, 0.0, 0.0] {
-        out.extend_from_slice(&x.to_le_bytes());
-    }
-    out.extend_from_slice(&0u32.to_le_bytes()); // node id
-    out.extend_from_slice(&0u32.to_le_bytes()); // no edges
-    w.write_all(&out)
+    w.write_all(&0u32.to_le_bytes()) // no edges
 }
 
 #[cfg(test)]
@@ -184,6 +202,31 @@ mod tests {
         assert_eq!(back, c);
         for cut in [0, 3, 10, buf.len() - 1] {
             assert!(read(&buf[..cut]).is_err(), "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn nodes_keep_their_poses_and_sensor_origins() {
+        let a = PointCloud::from_points(vec![Point3::new(1.0, 0.0, 0.0)]);
+        let b =
+            PointCloud::from_points(vec![Point3::new(0.0, 2.0, 0.0), Point3::new(0.5, 0.0, 0.0)])
+                .with_origin(Point3::new(0.0, 0.0, 1.0));
+        let pa = Pose::from_xyz_ypr(3.0, 0.0, 0.0, 90.0, 0.0, 0.0);
+        let pb = Pose::from_xyz_ypr(0.0, -1.0, 0.5, -30.0, 10.0, 0.0);
+        let mut buf = Vec::new();
+        write_nodes(&mut buf, [(pa, &a), (pb, &b)]).unwrap();
+        let (nodes, _) = read_nodes(&buf[..]).unwrap();
+        assert_eq!(nodes.len(), 2);
+        assert_eq!(nodes[1].id, 1);
+        for (node, (pose, cloud)) in nodes.iter().zip([(pa, &a), (pb, &b)]) {
+            // Same points in the world, and the node sits at the sensor origin.
+            let o = pose.transform_point(&cloud.origin());
+            assert!((Point3::from(node.pose.translation()) - o).norm() < 1e-9);
+            for (p, q) in node.cloud.points().iter().zip(cloud.points()) {
+                let w1 = node.pose.transform_point(&p.cast::<f64>());
+                let w2 = pose.transform_point(&q.cast::<f64>());
+                assert!((w1 - w2).norm() < 1e-6, "{w1} {w2}");
+            }
         }
     }
 }

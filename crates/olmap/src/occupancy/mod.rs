@@ -9,7 +9,9 @@
 //! * downsampling (thesis Algorithm 4) and the incremental [`Pyramid`];
 //! * overlap of a scan with a map (thesis (5.7)), plain and weighted;
 //! * files: `.olm` (olmap's exact binary format) and OctoMap `.bt` via [`read_map`] /
-//!   [`write_map`].
+//!   [`write_map`];
+//! * free space at OctoMap's semantics, as an option: [`LogOddsMap`] (unknown / free /
+//!   occupied, log-odds with clamping, `.bt` export with free nodes).
 //!
 //! Memory: one `u64` per hash slot holds the key and the count (see the `packed` layout),
 //! 10-15 bytes per stored voxel.
@@ -17,6 +19,7 @@
 mod buckets;
 mod file;
 mod list;
+mod logodds;
 mod olm;
 mod overlap;
 mod packed;
@@ -31,6 +34,10 @@ mod voxelize;
 pub use buckets::PositionBuckets;
 pub use file::{read_map, read_map_from, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
 pub use list::{OccupancyList, OccupancyStats};
+pub use logodds::{
+    logit, run_free_space, FreeSpaceJob, FreeSpaceReport, FreeSpaceRun, LogOddsInsertStats,
+    LogOddsMap, LogOddsModel, LogOddsStats, VoxelState, LOG_ODDS_SCALE,
+};
 pub use olm::{OLM_MAGIC, OLM_VERSION};
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};
 pub use pyramid::Pyramid;

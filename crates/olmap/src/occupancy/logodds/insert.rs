@@ -1,0 +1,236 @@
+//! Scan insertion into a [`LogOddsMap`] at OctoMap's semantics
+//! (`OccupancyOcTree::insertPointCloud` with `computeUpdate`, neither lazy nor discretised).
+//!
+//! For every point of a scan: the voxels a ray passes through from the sensor's voxel up
+//! to, but not including, the endpoint's voxel are observed free; the endpoint's voxel is
+//! observed occupied if the point is within the maximum range. A ray longer than the range
+//! is cut there and observes free space only (its last voxel, the one at the cut, is not
+//! updated). Each voxel is updated once per scan, and a voxel that is some ray's endpoint
+//! is not also freed by the scan.
+//!
+//! How: the rays are walked in parallel chunks; each chunk marks the voxels it saw in
+//! per-brick bit masks (one `u64` for free, one for hit, per touched brick of 64 voxels;
+//! consecutive steps of a ray mostly stay in one brick, so most marks are one OR). The
+//! chunks' masks are OR-ed together and then applied brick by brick. Bitwise OR does not
+//! depend on the order, so the map is the same for any thread count.
+
+use rayon::prelude::*;
+
+use super::bricks::{split, BrickId, IdMap};
+use super::model::UNKNOWN;
+use super::LogOddsMap;
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::geometry::{Pose, VoxelKey};
+use crate::occupancy::VoxelRay;
+
+/// What one scan insertion into a [`LogOddsMap`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct LogOddsInsertStats {
+    /// Rays cast (points of the scan).
+    pub rays: u64,
+    /// Rays cut at the maximum range (no endpoint hit).
+    pub truncated: u64,
+    /// Points skipped: non-finite, or with a voxel outside the representable range.
+    pub skipped: u64,
+    /// Voxel steps walked by all rays together.
+    pub voxels_traversed: u64,
+    /// Distinct voxels updated as occupied.
+    pub occupied_updates: u64,
+    /// Distinct voxels updated as free.
+    pub free_updates: u64,
+    /// Voxels observed for the first time.
+    pub new_voxels: u64,
+}
+
+impl LogOddsInsertStats {
+    /// Adds another insertion's counts to these.
+    pub fn add(&mut self, o: &LogOddsInsertStats) {
+        self.rays += o.rays;
+        self.truncated += o.truncated;
+        self.skipped += o.skipped;
+        self.voxels_traversed += o.voxels_traversed;
+        self.occupied_updates += o.occupied_updates;
+        self.free_updates += o.free_updates;
+        self.new_voxels += o.new_voxels;
+    }
+}
+
+/// The voxels of one brick a scan saw free and hit.
+#[derive(Clone, Copy)]
+struct Mask {
+    id: BrickId,
+    free: u64,
+    hit: u64,
+}
+
+/// The marks of a chunk of rays.
+struct Marks {
+    index: IdMap<u32>,
+    masks: Vec<Mask>,
+    last_id: BrickId,
+    last: usize,
+    stats: LogOddsInsertStats,
+}
+
+impl Default for Marks {
+    fn default() -> Self {
+        Marks {
+            index: IdMap::default(),
+            masks: Vec::new(),
+            last_id: u64::MAX,
+            last: 0,
+            stats: LogOddsInsertStats::default(),
+        }
+    }
+}
+
+impl Marks {
+    #[inline]
+    fn slot(&mut self, id: BrickId) -> usize {
+        if id != self.last_id {
+            let next = self.masks.len() as u32;
+            let i = *self.index.entry(id).or_insert(next);
+            if i == next {
+                self.masks.push(Mask {
+                    id,
+                    free: 0,
+                    hit: 0,
+                });
+            }
+            self.last_id = id;
+            self.last = i as usize;
+        }
+        self.last
+    }
+
+    #[inline]
+    fn mark(&mut self, key: VoxelKey, hit: bool) {
+        if let Some((id, bit)) = split(key) {
+            let i = self.slot(id);
+            let m = &mut self.masks[i];
+            if hit {
+                m.hit |= 1 << bit;
+            } else {
+                m.free |= 1 << bit;
+            }
+        }
+    }
+
+    fn merge(self, other: Marks) -> Marks {
+        let (mut big, small) = if self.masks.len() >= other.masks.len() {
+            (self, other)
+        } else {
+            (other, self)
+        };
+        for m in &small.masks {
+            let i = big.slot(m.id);
+            big.masks[i].free |= m.free;
+            big.masks[i].hit |= m.hit;
+        }
+        let s = small.stats;
+        big.stats.rays += s.rays;
+        big.stats.truncated += s.truncated;
+        big.stats.skipped += s.skipped;
+        big.stats.voxels_traversed += s.voxels_traversed;
+        big
+    }
+}
+
+impl LogOddsMap {
+    /// Integrates one scan (see the module documentation of
+    /// [`crate::occupancy::LogOddsMap`] for the semantics: OctoMap's `insertPointCloud`).
+    ///
+    /// `cloud` is in the sensor frame (its origin is where rays start) and `t_map_sensor`
+    /// places it in the map. A sensor origin outside the representable key range is
+    /// [`Error::InvalidArgument`] and changes nothing. Work is spread over the rayon
+    /// thread pool; the map does not depend on the number of threads.
+    ///
+    /// ```
+    /// use olmap::cloud::PointCloud;
+    /// use olmap::geometry::Pose;
+    /// use olmap::occupancy::{LogOddsMap, LogOddsModel, VoxelState};
+    /// use nalgebra::Point3;
+    /// let mut map = LogOddsMap::new(0.1, LogOddsModel::default()).unwrap();
+    /// let wall = PointCloud::from_points(vec![Point3::new(1.05, 0.05, 0.05)]);
+    /// map.insert_scan(&wall, &Pose::identity()).unwrap();
+    /// assert_eq!(map.state_at(&Point3::new(1.05, 0.05, 0.05)), VoxelState::Occupied);
+    /// assert_eq!(map.state_at(&Point3::new(0.55, 0.05, 0.05)), VoxelState::Free);
+    /// assert_eq!(map.state_at(&Point3::new(1.55, 0.05, 0.05)), VoxelState::Unknown);
+    /// ```
+    pub fn insert_scan(
+        &mut self,
+        cloud: &PointCloud,
+        t_map_sensor: &Pose,
+    ) -> Result<LogOddsInsertStats> {
+        let res = self.resolution;
+        let origin = t_map_sensor.transform_point(&cloud.origin());
+        if VoxelKey::from_point(&origin, res).and_then(split).is_none() {
+            return Err(Error::InvalidArgument(format!(
+                "the sensor origin {origin} is outside the map's representable range"
+            )));
+        }
+        let iso = *t_map_sensor.isometry();
+        let max_range = self.model.max_range;
+        let threads = rayon::current_num_threads().max(1);
+        let chunk = (cloud.len() / (4 * threads)).clamp(1024, 1 << 16);
+        let marks = cloud
+            .points()
+            .par_chunks(chunk)
+            .map(|points| {
+                let mut marks = Marks::default();
+                for p in points {
+                    marks.stats.rays += 1;
+                    let end = iso.transform_point(&p.cast::<f64>());
+                    let d = end - origin;
+                    let r = d.norm();
+                    if !r.is_finite() {
+                        marks.stats.skipped += 1;
+                        continue;
+                    }
+                    let (end, hit) = if r > max_range {
+                        marks.stats.truncated += 1;
+                        (origin + d * (max_range / r), false)
+                    } else {
+                        (end, true)
+                    };
+                    let Some(end_key) =
+                        VoxelKey::from_point(&end, res).filter(|k| split(*k).is_some())
+                    else {
+                        marks.stats.skipped += 1;
+                        continue;
+                    };
+                    let ray = VoxelRay::new(&origin, &end, res);
+                    let free = ray.remaining().saturating_sub(1);
+                    marks.stats.voxels_traversed += free + 1;
+                    for key in ray.take(free as usize) {
+                        marks.mark(key, false);
+                    }
+                    if hit {
+                        marks.mark(end_key, true);
+                    }
+                }
+                marks
+            })
+            .reduce(Marks::default, Marks::merge);
+        let mut stats = marks.stats;
+        let q = self.quantised;
+        for m in &marks.masks {
+            let free = m.free & !m.hit;
+            stats.occupied_updates += u64::from(m.hit.count_ones());
+            stats.free_updates += u64::from(free.count_ones());
+            let brick = self.bricks.get_or_insert(m.id);
+            for (mut bits, delta) in [(m.hit, q.hit), (free, q.miss)] {
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let v = brick[i];
+                    stats.new_voxels += u64::from(v == UNKNOWN);
+                    brick[i] = q.update(v, delta);
+                }
+            }
+        }
+        self.voxels += stats.new_voxels as usize;
+        Ok(stats)
+    }
+}
