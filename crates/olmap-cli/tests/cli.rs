@@ -490,6 +490,35 @@ fn free_space_map_matches_octomap_on_a_real_scan() {
     ]));
     assert_eq!(own["both_known"].as_u64(), Some(n("voxels")));
     assert_eq!(own["agreement"], 1.0);
+    // Queries tell free from unknown: ahead of the sensor along x (inside the scan's
+    // field of view, README §2.3) the rays cross free space; behind it (all x >= -0.08 m)
+    // nothing was seen.
+    let at = |p: &str| {
+        json(&olmap(&[
+            "query",
+            "--json",
+            ours.to_str().unwrap(),
+            "--at",
+            p,
+        ]))
+    };
+    assert_eq!(at("0.35,0.05,0.05")["state"], "free");
+    assert_eq!(at("-5,0,0")["state"], "unknown");
+    let seg = |s: &str| {
+        json(&olmap(&[
+            "query",
+            "--json",
+            ours.to_str().unwrap(),
+            "--segment",
+            s,
+        ]))
+    };
+    assert_eq!(seg("0.05,0.05,0.05,0.45,0.05,0.05")["known_free"], true);
+    let behind = seg("0.05,0.05,0.05,-3,0.05,0.05");
+    assert_eq!(
+        (behind["free"].clone(), behind["known_free"].clone()),
+        (true.into(), false.into())
+    );
     // OctoMap itself on the same scan (Debian octomap-tools, installed by .ci/run when
     // possible): the acceptance is >= 99 % agreement on voxels both know.
     let theirs = dir.path().join("octomap.bt");

@@ -16,7 +16,8 @@ use crate::args::parse_numbers;
 pub struct QueryArgs {
     /// The map (.olm or OctoMap .bt).
     pub map: PathBuf,
-    /// Is the voxel holding this point occupied? X,Y,Z (m).
+    /// Is the voxel holding this point occupied? X,Y,Z (m). On a .bt with free nodes
+    /// (`voxelize --free-space`) also: unknown, free or occupied.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub at: Option<String>,
     /// The first occupied voxel along a ray from X,Y,Z in direction DX,DY,DZ, and its
@@ -26,7 +27,8 @@ pub struct QueryArgs {
     /// The occupied voxels whose centres lie within R metres of X,Y,Z.
     #[arg(long, value_name = "X,Y,Z,R", allow_hyphen_values = true)]
     pub radius: Option<String>,
-    /// Is the segment between two points free of occupied voxels?
+    /// Is the segment between two points free of occupied voxels? On a .bt with free
+    /// nodes also: is every voxel on it known free?
     #[arg(long, value_name = "X1,Y1,Z1,X2,Y2,Z2", allow_hyphen_values = true)]
     pub segment: Option<String>,
     /// Rays reach at most this far, metres.
@@ -57,6 +59,22 @@ pub fn run(a: &QueryArgs) -> anyhow::Result<ExitCode> {
     } else {
         bail!("give one of --at, --ray, --radius, --segment");
     };
+    // A .bt tree with free nodes (`olmap voxelize --free-space`, OctoMap's own maps) also
+    // tells free from unknown.
+    let is_bt = a
+        .map
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("bt"));
+    let report = if is_bt {
+        let index = olmap::io::octomap_bt::read_leaves_path(&a.map)?.index();
+        if index.has_free() {
+            report.with_known_space(&index, map.resolution())
+        } else {
+            report
+        }
+    } else {
+        report
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -72,10 +90,10 @@ fn text(report: &QueryReport, r: f64) -> String {
             let [x, y, z] = q.point;
             format!(
                 "({x}, {y}, {z}): {} (count {})",
-                if q.occupied {
-                    "occupied"
-                } else {
-                    "free or unknown"
+                match q.state {
+                    Some(s) => format!("{s:?}").to_lowercase(),
+                    None if q.occupied => "occupied".into(),
+                    None => "free or unknown".into(),
                 },
                 q.count
             )
@@ -103,6 +121,23 @@ fn text(report: &QueryReport, r: f64) -> String {
             }
             text
         }
-        QueryReport::Segment(q) => format!("segment {}", if q.free { "free" } else { "blocked" }),
+        QueryReport::Segment(q) => {
+            let mut text = format!(
+                "segment {}",
+                if q.free {
+                    "free of occupied voxels"
+                } else {
+                    "blocked"
+                }
+            );
+            if let Some(k) = q.known_free {
+                text.push_str(if k {
+                    "; every voxel on it is known free"
+                } else {
+                    "; not every voxel on it is known free (unknown or occupied ones)"
+                });
+            }
+            text
+        }
     }
 }

@@ -278,6 +278,25 @@ impl BtLeaves {
         Ok(c)
     }
 
+    /// A lookup of the state of any voxel, without expanding the tree (16 bytes per leaf,
+    /// a binary search per lookup).
+    ///
+    /// ```
+    /// use olmap::geometry::VoxelKey;
+    /// use olmap::io::octomap_bt;
+    /// let mut file = Vec::new();
+    /// octomap_bt::write_classified(&mut file, 0.1, [(VoxelKey::new(0, 0, 0), true), (VoxelKey::new(1, 0, 0), false)]).unwrap();
+    /// let index = octomap_bt::read_leaves(&file[..]).unwrap().index();
+    /// assert_eq!(index.state(&VoxelKey::new(0, 0, 0)), Some(true));
+    /// assert_eq!(index.state(&VoxelKey::new(1, 0, 0)), Some(false));
+    /// assert_eq!(index.state(&VoxelKey::new(2, 0, 0)), None);
+    /// ```
+    pub fn index(&self) -> BtIndex {
+        BtIndex {
+            ranges: self.ranges(),
+        }
+    }
+
     /// Every leaf as a Morton range with its state (occupied = true), sorted.
     fn ranges(&self) -> Vec<(u64, u64, bool)> {
         let mut r: Vec<(u64, u64, bool)> = self
@@ -349,6 +368,29 @@ pub fn read_leaves<R: BufRead>(reader: R) -> Result<BtLeaves, ParseError> {
         leaves,
         free,
     })
+}
+
+/// The leaves of a `.bt` tree as sorted Morton ranges: the state of any voxel by binary
+/// search ([`BtLeaves::index`]).
+#[derive(Debug, Clone)]
+pub struct BtIndex {
+    ranges: Vec<(u64, u64, bool)>,
+}
+
+impl BtIndex {
+    /// `Some(true)` for an occupied voxel, `Some(false)` for a free one, `None` when the
+    /// tree does not know it (or it is outside OctoMap's key range).
+    pub fn state(&self, key: &VoxelKey) -> Option<bool> {
+        let code = morton(octomap_key(key)?);
+        let i = self.ranges.partition_point(|r| r.0 <= code);
+        let (_, end, occupied) = *self.ranges.get(i.checked_sub(1)?)?;
+        (code < end).then_some(occupied)
+    }
+
+    /// Whether the tree has free leaves (a tree written with free space).
+    pub fn has_free(&self) -> bool {
+        self.ranges.iter().any(|r| !r.2)
+    }
 }
 
 /// How two trees classify the voxels of one resolution ([`BtLeaves::compare`]); counts are

@@ -4,8 +4,9 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::OccupancyList;
+use super::{OccupancyList, VoxelRay, VoxelState};
 use crate::geometry::VoxelKey;
+use crate::io::octomap_bt::BtIndex;
 use crate::Result;
 
 /// One voxel of a map: key, centre and count.
@@ -42,6 +43,10 @@ pub struct AtReport {
     pub occupied: bool,
     /// Its voxel's count.
     pub count: u16,
+    /// Unknown, free or occupied, for a map that knows free space (a `.bt` tree with free
+    /// nodes, see [`QueryReport::with_known_space`]); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<VoxelState>,
 }
 
 /// The first occupied voxel along a ray.
@@ -96,6 +101,11 @@ pub struct SegmentReport {
     pub to: [f64; 3],
     /// Whether no occupied voxel lies on it.
     pub free: bool,
+    /// For a map that knows free space: whether every voxel on the segment is known to
+    /// be free (no occupied and no unknown voxel: what a planner may drive through);
+    /// absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub known_free: Option<bool>,
 }
 
 /// The answer of one `olmap query`.
@@ -123,6 +133,7 @@ impl QueryReport {
             point: p,
             occupied: count >= min_count.max(1),
             count,
+            state: None,
         })
     }
 
@@ -202,6 +213,38 @@ impl QueryReport {
             from,
             to,
             free,
+            known_free: None,
         }))
+    }
+
+    /// Adds what a tree with free space knows: the state of a point query's voxel, and
+    /// whether a segment is known free along its whole length (walked voxel by voxel
+    /// through `resolution`-metre voxels; the walk stops at the first voxel that is not
+    /// known free, and a tree spans at most 65,536 voxels per axis). Other answers are
+    /// unchanged.
+    pub fn with_known_space(mut self, index: &BtIndex, resolution: f64) -> Self {
+        let state = |k: &VoxelKey| match index.state(k) {
+            None => VoxelState::Unknown,
+            Some(true) => VoxelState::Occupied,
+            Some(false) => VoxelState::Free,
+        };
+        match &mut self {
+            QueryReport::At(q) => {
+                let p = Point3::new(q.point[0], q.point[1], q.point[2]);
+                q.state = Some(
+                    VoxelKey::from_point(&p, resolution).map_or(VoxelState::Unknown, |k| state(&k)),
+                );
+            }
+            QueryReport::Segment(q) => {
+                let a = Point3::from(q.from);
+                let b = Point3::from(q.to);
+                let ray = VoxelRay::new(&a, &b, resolution);
+                let finite = ray.remaining() > 0;
+                q.known_free =
+                    Some(finite && ray.into_iter().all(|k| state(&k) == VoxelState::Free));
+            }
+            _ => {}
+        }
+        self
     }
 }

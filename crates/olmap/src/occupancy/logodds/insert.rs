@@ -24,6 +24,13 @@ use crate::error::{Error, Result};
 use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::VoxelRay;
 
+/// The most bricks (of 4 x 4 x 4 voxels, 128 bytes each) a [`LogOddsMap`] may hold:
+/// 2^24 = 16,777,216, about 1.07 billion voxels and 2.3 GiB with the index. A scan that would
+/// take a map beyond it is refused with [`Error::TooLarge`] before the map changes, and the
+/// marks of one scan stop at the same count: memory stays bounded whatever a scan holds (a
+/// few far points with no maximum range walk long rays through fresh bricks).
+pub const MAX_BRICKS: usize = 1 << 24;
+
 /// What one scan insertion into a [`LogOddsMap`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct LogOddsInsertStats {
@@ -70,25 +77,36 @@ struct Marks {
     masks: Vec<Mask>,
     last_id: BrickId,
     last: usize,
+    /// The most bricks to record.
+    limit: usize,
+    /// More than `limit` bricks were touched: marking stopped.
+    overflow: bool,
     stats: LogOddsInsertStats,
 }
 
-impl Default for Marks {
-    fn default() -> Self {
+impl Marks {
+    fn new(limit: usize) -> Self {
         Marks {
             index: IdMap::default(),
             masks: Vec::new(),
             last_id: u64::MAX,
             last: 0,
+            limit,
+            overflow: false,
             stats: LogOddsInsertStats::default(),
         }
     }
-}
 
-impl Marks {
     #[inline]
-    fn slot(&mut self, id: BrickId) -> usize {
+    fn slot(&mut self, id: BrickId) -> Option<usize> {
         if id != self.last_id {
+            if self.masks.len() >= self.limit {
+                // Past the limit: nothing more is recorded, the scan will be refused.
+                self.overflow = true;
+                if !self.index.contains_key(&id) {
+                    return None;
+                }
+            }
             let next = self.masks.len() as u32;
             let i = *self.index.entry(id).or_insert(next);
             if i == next {
@@ -101,13 +119,13 @@ impl Marks {
             self.last_id = id;
             self.last = i as usize;
         }
-        self.last
+        Some(self.last)
     }
 
     #[inline]
     fn mark(&mut self, key: VoxelKey, hit: bool) {
         if let Some((id, bit)) = split(key) {
-            let i = self.slot(id);
+            let Some(i) = self.slot(id) else { return };
             let m = &mut self.masks[i];
             if hit {
                 m.hit |= 1 << bit;
@@ -123,8 +141,9 @@ impl Marks {
         } else {
             (other, self)
         };
+        big.overflow |= small.overflow;
         for m in &small.masks {
-            let i = big.slot(m.id);
+            let Some(i) = big.slot(m.id) else { break };
             big.masks[i].free |= m.free;
             big.masks[i].hit |= m.hit;
         }
@@ -143,7 +162,8 @@ impl LogOddsMap {
     ///
     /// `cloud` is in the sensor frame (its origin is where rays start) and `t_map_sensor`
     /// places it in the map. A sensor origin outside the representable key range is
-    /// [`Error::InvalidArgument`] and changes nothing. Work is spread over the rayon
+    /// [`Error::InvalidArgument`], and a scan that would take the map beyond [`MAX_BRICKS`]
+    /// is [`Error::TooLarge`]; either changes nothing. Work is spread over the rayon
     /// thread pool; the map does not depend on the number of threads.
     ///
     /// ```
@@ -172,14 +192,18 @@ impl LogOddsMap {
         }
         let iso = *t_map_sensor.isometry();
         let max_range = self.model.max_range;
+        let limit = self.brick_limit;
         let threads = rayon::current_num_threads().max(1);
         let chunk = (cloud.len() / (4 * threads)).clamp(1024, 1 << 16);
         let marks = cloud
             .points()
             .par_chunks(chunk)
             .map(|points| {
-                let mut marks = Marks::default();
+                let mut marks = Marks::new(limit);
                 for p in points {
+                    if marks.overflow {
+                        break;
+                    }
                     marks.stats.rays += 1;
                     let end = iso.transform_point(&p.cast::<f64>());
                     let d = end - origin;
@@ -212,7 +236,27 @@ impl LogOddsMap {
                 }
                 marks
             })
-            .reduce(Marks::default, Marks::merge);
+            .reduce(|| Marks::new(limit), Marks::merge);
+        let fresh = marks
+            .masks
+            .iter()
+            .filter(|m| self.bricks.get(m.id).is_none())
+            .count();
+        if marks.overflow || self.bricks.len() + fresh > limit {
+            return Err(Error::TooLarge {
+                what: format!(
+                    "a scan of {} points whose rays cross more voxels than the free-space map \
+                     may hold (it has {} bricks of 4x4x4 voxels, the scan adds {}{})",
+                    cloud.len(),
+                    self.bricks.len(),
+                    fresh,
+                    if marks.overflow { " and more" } else { "" }
+                ),
+                limit: format!(
+                    "{limit} bricks of 128 bytes: use a coarser resolution or a maximum range"
+                ),
+            });
+        }
         let mut stats = marks.stats;
         let q = self.quantised;
         for m in &marks.masks {

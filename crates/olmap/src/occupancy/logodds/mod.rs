@@ -25,7 +25,7 @@ mod insert;
 mod model;
 mod pipeline;
 
-pub use insert::LogOddsInsertStats;
+pub use insert::{LogOddsInsertStats, MAX_BRICKS};
 pub use model::{logit, LogOddsModel, LOG_ODDS_SCALE};
 pub use pipeline::{run_free_space, FreeSpaceJob, FreeSpaceReport, FreeSpaceRun};
 
@@ -102,6 +102,8 @@ pub struct LogOddsMap {
     quantised: Quantised,
     bricks: Bricks,
     voxels: usize,
+    /// [`MAX_BRICKS`], lowered by tests.
+    brick_limit: usize,
 }
 
 impl std::fmt::Debug for LogOddsMap {
@@ -131,6 +133,7 @@ impl LogOddsMap {
             quantised: model.quantised(),
             bricks: Bricks::default(),
             voxels: 0,
+            brick_limit: MAX_BRICKS,
         })
     }
 

@@ -288,3 +288,37 @@ fn bad_input_is_refused() {
         .unwrap();
     assert_eq!((s.skipped, s.occupied_updates), (2, 1));
 }
+
+#[test]
+fn a_scan_beyond_the_brick_limit_is_refused_and_changes_nothing() {
+    let mut map = LogOddsMap::new(0.05, LogOddsModel::default()).unwrap();
+    map.brick_limit = 2_000;
+    map.insert_scan(&cloud(&[[1.0, 0.0, 0.0]]), &Pose::identity())
+        .unwrap();
+    let before = sorted(&map);
+    // 200 rays of 500 m fanning out: far more than 2,000 fresh bricks.
+    let far: Vec<[f32; 3]> = (0..200)
+        .map(|i| {
+            let a = i as f32 * 0.03;
+            [500.0 * a.cos(), 500.0 * a.sin(), 3.0]
+        })
+        .collect();
+    let err = map
+        .insert_scan(&cloud(&far), &Pose::identity())
+        .unwrap_err();
+    assert!(matches!(err, Error::TooLarge { .. }), "{err}");
+    assert!(err.to_string().contains("resolution"), "{err}");
+    assert_eq!(sorted(&map), before);
+    // With a maximum range the same scan fits.
+    let mut map = LogOddsMap::new(
+        0.05,
+        LogOddsModel {
+            max_range: 2.0,
+            ..LogOddsModel::default()
+        },
+    )
+    .unwrap();
+    map.brick_limit = 2_000;
+    let s = map.insert_scan(&cloud(&far), &Pose::identity()).unwrap();
+    assert_eq!(s.truncated, 200);
+}
