@@ -8,7 +8,7 @@
 //! the library's reports as dicts (the schemas of the command line's `--json`).
 //!
 //! One file per part of the API: [`cloud`] (PointCloud, read/write), [`align`] (align,
-//! localize, Alignment), [`map`] (OccupancyMap), [`poses`] (read_poses), [`build`] (build_map), [`sim`] (simulate,
+//! localize, Alignment), [`map`] (OccupancyMap), [`free_space`] (FreeSpaceMap), [`poses`] (read_poses), [`build`] (build_map), [`sim`] (simulate,
 //! map_team), [`beacon`] (detect_beacons, mutual_localisation); [`convert`] (numpy in and
 //! out), [`errors`] (exceptions) and [`threads`] (GIL release, thread counts).
 //!
@@ -23,6 +23,7 @@ mod build;
 mod cloud;
 mod convert;
 mod errors;
+mod free_space;
 mod map;
 mod poses;
 mod sim;
@@ -38,6 +39,7 @@ fn _olmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<cloud::PyPointCloud>()?;
     m.add_class::<align::PyAlignment>()?;
     m.add_class::<map::PyOccupancyMap>()?;
+    m.add_class::<free_space::PyFreeSpaceMap>()?;
     m.add_class::<build::PyMapBuild>()?;
     m.add_class::<sim::PySimDataset>()?;
     m.add_class::<sim::PyTeamResult>()?;

@@ -12,7 +12,7 @@ PUBLIC_FUNCTIONS = [
     olmap.mutual_localisation,
 ]
 CLASSES = [
-    olmap.PointCloud, olmap.Alignment, olmap.OccupancyMap, olmap.MapBuild, olmap.SimDataset,
+    olmap.PointCloud, olmap.Alignment, olmap.OccupancyMap, olmap.FreeSpaceMap, olmap.MapBuild, olmap.SimDataset,
     olmap.TeamResult,
 ]
 

@@ -65,7 +65,8 @@ pub fn run(a: &QueryArgs) -> anyhow::Result<ExitCode> {
         .map
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("bt"));
-    let report = if is_bt {
+    let asks_state = a.at.is_some() || a.segment.is_some();
+    let report = if is_bt && asks_state {
         let index = olmap::io::octomap_bt::read_leaves_path(&a.map)?.index();
         if index.has_free() {
             report.with_known_space(&index, map.resolution())

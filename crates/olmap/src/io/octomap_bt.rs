@@ -84,15 +84,6 @@ pub struct BtStats {
     pub occupied_leaves_by_depth: [u64; 17],
 }
 
-impl BtStats {
-    /// The voxels of the tree's resolution its occupied and free leaves stand for.
-    pub fn known_voxels(&self, leaves: &BtLeaves) -> u64 {
-        leaves
-            .expanded_voxels()
-            .saturating_add(leaves.free_voxels())
-    }
-}
-
 /// An OctoMap tree read from a `.bt` file: its occupied voxels.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BtTree {
@@ -169,7 +160,7 @@ impl Leaf {
 /// assert_eq!(tree.occupied, vec![VoxelKey::new(3, -2, 0)]);
 /// ```
 pub fn read<R: BufRead>(reader: R, max_voxels: usize) -> Result<BtTree, ParseError> {
-    let leaves = read_leaves(reader)?;
+    let leaves = read_leaves_keeping(reader, false)?;
     let total = leaves.expanded_voxels_within(max_voxels)?;
     // `total` <= `max_voxels`, so it fits a usize. The voxels are gathered as packed
     // OctoMap keys (x, y, z in 16 bits each, x most significant), whose order as integers
@@ -223,8 +214,9 @@ impl BtLeaves {
     }
 
     /// Compares the classification of two trees of one resolution voxel by voxel, without
-    /// expanding either (a sweep over their leaves in Morton order, linear in the leaves).
-    /// Trees of different resolutions are [`crate::Error::InvalidArgument`].
+    /// expanding either (the leaves sorted in Morton order, then swept together). Trees
+    /// whose resolutions differ by more than one part in a million (OctoMap writes `res`
+    /// with six significant digits) are [`crate::Error::InvalidArgument`].
     ///
     /// ```
     /// use olmap::geometry::VoxelKey;
@@ -241,7 +233,8 @@ impl BtLeaves {
     /// assert_eq!(c.agreement(), 0.5);
     /// ```
     pub fn compare(&self, other: &BtLeaves) -> crate::Result<BtComparison> {
-        if self.resolution != other.resolution {
+        let scale = self.resolution.abs().max(other.resolution.abs());
+        if (self.resolution - other.resolution).abs() > 1e-6 * scale {
             return Err(crate::Error::InvalidArgument(format!(
                 "trees of different resolutions ({} m and {} m) cannot be compared voxel by voxel",
                 self.resolution, other.resolution
@@ -278,7 +271,7 @@ impl BtLeaves {
         Ok(c)
     }
 
-    /// A lookup of the state of any voxel, without expanding the tree (16 bytes per leaf,
+    /// A lookup of the state of any voxel, without expanding the tree (24 bytes per leaf,
     /// a binary search per lookup).
     ///
     /// ```
@@ -358,10 +351,19 @@ impl BtLeaves {
 }
 
 /// Reads a `.bt` OctoMap tree from a stream without expanding it: memory in proportion to
-/// the file (16 bytes per leaf), whatever its leaves stand for. Errors as for [`read()`],
-/// but for the limit.
+/// the file (16 bytes per occupied or free leaf), whatever its leaves stand for. Errors as
+/// for [`read()`], but for the limit.
 pub fn read_leaves<R: BufRead>(reader: R) -> Result<BtLeaves, ParseError> {
-    let (header, stats, leaves, free) = parse(reader)?;
+    read_leaves_keeping(reader, true)
+}
+
+/// [`read_leaves()`], keeping the free leaves or only counting them (what reading a map
+/// of occupied voxels needs: OctoMap maps are mostly free leaves).
+pub(crate) fn read_leaves_keeping<R: BufRead>(
+    reader: R,
+    keep_free: bool,
+) -> Result<BtLeaves, ParseError> {
+    let (header, stats, leaves, free) = parse(reader, keep_free)?;
     Ok(BtLeaves {
         resolution: header.resolution,
         stats,
@@ -443,7 +445,7 @@ pub fn read_path(path: &Path, max_voxels: usize) -> crate::Result<BtTree> {
 type Parsed = (Header, BtStats, Vec<Leaf>, Vec<Leaf>);
 
 /// Parses header and body, returning the occupied and the free leaves unexpanded.
-fn parse<R: BufRead>(mut reader: R) -> Result<Parsed, ParseError> {
+fn parse<R: BufRead>(mut reader: R, keep_free: bool) -> Result<Parsed, ParseError> {
     let header = parse_header(&mut reader)?;
     let mut body = Body {
         r: reader,
@@ -453,7 +455,8 @@ fn parse<R: BufRead>(mut reader: R) -> Result<Parsed, ParseError> {
     let mut leaves = Vec::new();
     let mut free = Vec::new();
     if header.size > 0 {
-        parse_tree(&mut body, header.size, &mut stats, &mut leaves, &mut free)?;
+        let free = keep_free.then_some(&mut free);
+        parse_tree(&mut body, header.size, &mut stats, &mut leaves, free)?;
     }
     let end = body.offset;
     let rest = body.count_rest()?;
@@ -737,7 +740,7 @@ fn parse_tree<R: BufRead>(
     size: u64,
     stats: &mut BtStats,
     leaves: &mut Vec<Leaf>,
-    free: &mut Vec<Leaf>,
+    mut free: Option<&mut Vec<Leaf>>,
 ) -> Result<(), ParseError> {
     let at = body.offset;
     let bits = body.inner_node(|| "the root node".to_string())?;
@@ -777,7 +780,9 @@ fn parse_tree<R: BufRead>(
         match code {
             0b01 => {
                 stats.free_leaves += 1;
-                free.push(Leaf { depth, prefix });
+                if let Some(free) = free.as_mut() {
+                    free.push(Leaf { depth, prefix });
+                }
             }
             0b10 => {
                 stats.occupied_leaves += 1;
@@ -1057,7 +1062,7 @@ mod tests {
 
         // Occupied-leaf centres (README §2.4): x -7.96..30.92, y -7.48..7.40, z -0.28..2.76.
         let expected = [[-7.96, 30.92], [-7.48, 7.40], [-0.28, 2.76]];
-        let (_, _, leaves, _) = parse(&std::fs::read(&path).unwrap()[..]).unwrap();
+        let (_, _, leaves, _) = parse(&std::fs::read(&path).unwrap()[..], false).unwrap();
         let bounds = |centres: &mut dyn Iterator<Item = [f64; 3]>| {
             let mut b = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
             for c in centres {

@@ -95,7 +95,7 @@ pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedM
         }),
         MapFormat::OctomapBt => {
             // Expanded straight into the map (no sorted copy): 10 bytes a voxel.
-            let tree = octomap_bt::read_leaves(reader)?;
+            let tree = octomap_bt::read_leaves_keeping(reader, false)?;
             let total = tree.expanded_voxels_within(MAX_BT_VOXELS)?;
             let mut map =
                 OccupancyList::with_capacity(tree.resolution, total as usize).map_err(|e| {

@@ -36,7 +36,7 @@ pub use file::{read_map, read_map_from, write_map, LoadedMap, MapFormat, MAX_BT_
 pub use list::{OccupancyList, OccupancyStats};
 pub use logodds::{
     logit, run_free_space, FreeSpaceJob, FreeSpaceReport, FreeSpaceRun, LogOddsInsertStats,
-    LogOddsMap, LogOddsModel, LogOddsStats, VoxelState, LOG_ODDS_SCALE, MAX_BRICKS,
+    LogOddsMap, LogOddsModel, LogOddsStats, VoxelState, MAX_BRICKS,
 };
 pub use olm::{OLM_MAGIC, OLM_VERSION};
 pub use packed::{KEY_MAX, KEY_MIN, MAX_COUNT};

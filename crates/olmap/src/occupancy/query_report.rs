@@ -44,7 +44,8 @@ pub struct AtReport {
     /// Its voxel's count.
     pub count: u16,
     /// Unknown, free or occupied, for a map that knows free space (a `.bt` tree with free
-    /// nodes, see [`QueryReport::with_known_space`]); absent otherwise.
+    /// nodes, see [`QueryReport::with_known_space`]): the tree's own classification,
+    /// whatever `min_count` (a tree read as a map holds counts of 1); absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state: Option<VoxelState>,
 }

@@ -9,6 +9,7 @@ mod bad_input;
 mod bag;
 mod beacon;
 mod data_safety;
+mod free_space;
 mod fuzz;
 mod graph;
 mod grid2d;

@@ -1,9 +1,12 @@
-//! Brick storage of a log-odds map: 4 x 4 x 4 voxels of `i16` log-odds (128 bytes) per
+//! Brick storage of a log-odds map: 4 x 4 x 4 voxels of `f32` log-odds (256 bytes) per
 //! brick, bricks found through a hash table keyed by the brick's packed coordinates.
 //!
 //! Free space is dense (every voxel a ray crosses), so whole bricks fill up and a voxel
-//! costs a little over 2 bytes there; near surfaces bricks are partly unknown. A voxel is
+//! costs a little over 4 bytes there; near surfaces bricks are partly unknown. A voxel is
 //! never forgotten once observed, so bricks are only ever added.
+//!
+//! Keys are limited to OctoMap's 16-bit range (-32,768..=32,767 per axis), so that every
+//! map can be written as a `.bt` tree.
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -20,15 +23,24 @@ pub(super) const BRICK_VOXELS: usize = 1 << (3 * EDGE_BITS);
 
 /// One brick: the log-odds of its voxels ([`UNKNOWN`] for unobserved ones), indexed by
 /// [`local_index`].
-pub(super) type Brick = [i16; BRICK_VOXELS];
+pub(super) type Brick = [f32; BRICK_VOXELS];
 
 /// A brick's identity: the packed key of its lowest voxel (a multiple of 4 on each axis).
 pub(super) type BrickId = u64;
 
-/// The brick and the bit (index within the brick) of a voxel key, or `None` outside the
-/// packed key range ([`crate::occupancy::KEY_MIN`]..=[`crate::occupancy::KEY_MAX`]).
+/// The smallest key index per axis (OctoMap's).
+pub(super) const MAP_KEY_MIN: i32 = -(1 << 15);
+/// The largest key index per axis (OctoMap's).
+pub(super) const MAP_KEY_MAX: i32 = (1 << 15) - 1;
+
+/// The brick and the bit (index within the brick) of a voxel key, or `None` outside
+/// OctoMap's key range ([`MAP_KEY_MIN`]..=[`MAP_KEY_MAX`] per axis).
 #[inline]
 pub(super) fn split(k: VoxelKey) -> Option<(BrickId, usize)> {
+    let inside = |v: i32| (MAP_KEY_MIN..=MAP_KEY_MAX).contains(&v);
+    if !(inside(k.x) && inside(k.y) && inside(k.z)) {
+        return None;
+    }
     let corner = VoxelKey::new(k.x & !EDGE_MASK, k.y & !EDGE_MASK, k.z & !EDGE_MASK);
     let id = pack_key(corner)?;
     Some((id, local_index(k)))
@@ -145,8 +157,8 @@ mod tests {
         for k in [
             VoxelKey::new(0, 0, 0),
             VoxelKey::new(-1, -4, -5),
-            VoxelKey::new(7, -130, 131_071),
-            VoxelKey::new(-131_072, 3, 2),
+            VoxelKey::new(7, -130, 32_767),
+            VoxelKey::new(-32_768, 3, 2),
         ] {
             let (id, i) = split(k).unwrap();
             assert!(i < BRICK_VOXELS);
@@ -161,6 +173,7 @@ mod tests {
             split(VoxelKey::new(1, 2, 3)).unwrap().0,
             split(VoxelKey::new(0, 0, 0)).unwrap().0
         );
-        assert!(split(VoxelKey::new(131_072, 0, 0)).is_none());
+        assert!(split(VoxelKey::new(32_768, 0, 0)).is_none());
+        assert!(split(VoxelKey::new(0, -32_769, 0)).is_none());
     }
 }

@@ -17,19 +17,23 @@
 use rayon::prelude::*;
 
 use super::bricks::{split, BrickId, IdMap};
-use super::model::UNKNOWN;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::bricks::Bricks;
+use super::model::is_unknown;
 use super::LogOddsMap;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::VoxelRay;
 
-/// The most bricks (of 4 x 4 x 4 voxels, 128 bytes each) a [`LogOddsMap`] may hold:
-/// 2^24 = 16,777,216, about 1.07 billion voxels and 2.3 GiB with the index. A scan that would
+/// The most bricks (of 4 x 4 x 4 voxels, 256 bytes each) a [`LogOddsMap`] may hold:
+/// 2^23 = 8,388,608, about 537 million voxels and 2.2 GiB with the index. A scan that would
 /// take a map beyond it is refused with [`Error::TooLarge`] before the map changes, and the
-/// marks of one scan stop at the same count: memory stays bounded whatever a scan holds (a
-/// few far points with no maximum range walk long rays through fresh bricks).
-pub const MAX_BRICKS: usize = 1 << 24;
+/// marking of one scan stops once its fresh bricks (counted over all threads) pass what
+/// the map has left: memory stays bounded whatever a scan holds (a few far points with no
+/// maximum range walk long rays through fresh bricks).
+pub const MAX_BRICKS: usize = 1 << 23;
 
 /// What one scan insertion into a [`LogOddsMap`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -71,39 +75,51 @@ struct Mask {
     hit: u64,
 }
 
+/// The budget of fresh bricks (not yet in the map) all chunks of one scan may record
+/// together: each chunk counts the fresh bricks it records in one shared counter (a brick
+/// several chunks touch is counted by each, so a scan may be refused a little before the
+/// map's limit), and marking stops everywhere once the count passes the budget.
+struct Budget<'a> {
+    existing: &'a Bricks,
+    fresh: AtomicUsize,
+    allowed: usize,
+}
+
 /// The marks of a chunk of rays.
-struct Marks {
+struct Marks<'a> {
     index: IdMap<u32>,
     masks: Vec<Mask>,
     last_id: BrickId,
     last: usize,
-    /// The most bricks to record.
-    limit: usize,
-    /// More than `limit` bricks were touched: marking stopped.
+    budget: &'a Budget<'a>,
+    /// The budget was exceeded: marking stopped, the scan will be refused.
     overflow: bool,
     stats: LogOddsInsertStats,
 }
 
-impl Marks {
-    fn new(limit: usize) -> Self {
+impl<'a> Marks<'a> {
+    fn new(budget: &'a Budget<'a>) -> Self {
         Marks {
             index: IdMap::default(),
             masks: Vec::new(),
             last_id: u64::MAX,
             last: 0,
-            limit,
+            budget,
             overflow: false,
             stats: LogOddsInsertStats::default(),
         }
     }
 
+    /// The index of brick `id`'s mask, created when needed; `None` when creating it would
+    /// pass the budget (then `overflow` is set). `count` is false when merging marks that
+    /// were counted when they were made.
     #[inline]
-    fn slot(&mut self, id: BrickId) -> Option<usize> {
+    fn slot(&mut self, id: BrickId, count: bool) -> Option<usize> {
         if id != self.last_id {
-            if self.masks.len() >= self.limit {
-                // Past the limit: nothing more is recorded, the scan will be refused.
-                self.overflow = true;
-                if !self.index.contains_key(&id) {
+            if count && !self.index.contains_key(&id) && self.budget.existing.get(id).is_none() {
+                let b = self.budget;
+                if b.fresh.fetch_add(1, Ordering::Relaxed) >= b.allowed {
+                    self.overflow = true;
                     return None;
                 }
             }
@@ -125,7 +141,9 @@ impl Marks {
     #[inline]
     fn mark(&mut self, key: VoxelKey, hit: bool) {
         if let Some((id, bit)) = split(key) {
-            let Some(i) = self.slot(id) else { return };
+            let Some(i) = self.slot(id, true) else {
+                return;
+            };
             let m = &mut self.masks[i];
             if hit {
                 m.hit |= 1 << bit;
@@ -135,7 +153,7 @@ impl Marks {
         }
     }
 
-    fn merge(self, other: Marks) -> Marks {
+    fn merge(self, other: Marks<'a>) -> Marks<'a> {
         let (mut big, small) = if self.masks.len() >= other.masks.len() {
             (self, other)
         } else {
@@ -143,7 +161,9 @@ impl Marks {
         };
         big.overflow |= small.overflow;
         for m in &small.masks {
-            let Some(i) = big.slot(m.id) else { break };
+            let Some(i) = big.slot(m.id, false) else {
+                unreachable!("merging is not counted")
+            };
             big.masks[i].free |= m.free;
             big.masks[i].hit |= m.hit;
         }
@@ -161,9 +181,11 @@ impl LogOddsMap {
     /// [`crate::occupancy::LogOddsMap`] for the semantics: OctoMap's `insertPointCloud`).
     ///
     /// `cloud` is in the sensor frame (its origin is where rays start) and `t_map_sensor`
-    /// places it in the map. A sensor origin outside the representable key range is
-    /// [`Error::InvalidArgument`], and a scan that would take the map beyond [`MAX_BRICKS`]
-    /// is [`Error::TooLarge`]; either changes nothing. Work is spread over the rayon
+    /// places it in the map. A sensor origin outside the map's key range (OctoMap's,
+    /// ±32,768 voxels per axis) is [`Error::InvalidArgument`], and a scan that would take
+    /// the map beyond [`MAX_BRICKS`] is [`Error::TooLarge`]; either changes nothing. A
+    /// point whose voxel (or whose cut point, beyond the maximum range) is outside the key
+    /// range is skipped with its whole ray, as OctoMap skips it. Work is spread over the rayon
     /// thread pool; the map does not depend on the number of threads.
     ///
     /// ```
@@ -193,15 +215,22 @@ impl LogOddsMap {
         let iso = *t_map_sensor.isometry();
         let max_range = self.model.max_range;
         let limit = self.brick_limit;
+        let budget = Budget {
+            existing: &self.bricks,
+            fresh: AtomicUsize::new(0),
+            allowed: limit.saturating_sub(self.bricks.len()),
+        };
+        let budget = &budget;
         let threads = rayon::current_num_threads().max(1);
         let chunk = (cloud.len() / (4 * threads)).clamp(1024, 1 << 16);
         let marks = cloud
             .points()
             .par_chunks(chunk)
             .map(|points| {
-                let mut marks = Marks::new(limit);
+                let mut marks = Marks::new(budget);
                 for p in points {
-                    if marks.overflow {
+                    if marks.overflow || budget.fresh.load(Ordering::Relaxed) > budget.allowed {
+                        marks.overflow = true;
                         break;
                     }
                     marks.stats.rays += 1;
@@ -236,7 +265,7 @@ impl LogOddsMap {
                 }
                 marks
             })
-            .reduce(|| Marks::new(limit), Marks::merge);
+            .reduce(|| Marks::new(budget), Marks::merge);
         let fresh = marks
             .masks
             .iter()
@@ -253,12 +282,12 @@ impl LogOddsMap {
                     if marks.overflow { " and more" } else { "" }
                 ),
                 limit: format!(
-                    "{limit} bricks of 128 bytes: use a coarser resolution or a maximum range"
+                    "{limit} bricks of 256 bytes: use a coarser resolution or a maximum range"
                 ),
             });
         }
         let mut stats = marks.stats;
-        let q = self.quantised;
+        let q = self.f32_model;
         for m in &marks.masks {
             let free = m.free & !m.hit;
             stats.occupied_updates += u64::from(m.hit.count_ones());
@@ -269,7 +298,7 @@ impl LogOddsMap {
                     let i = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     let v = brick[i];
-                    stats.new_voxels += u64::from(v == UNKNOWN);
+                    stats.new_voxels += u64::from(is_unknown(v));
                     brick[i] = q.update(v, delta);
                 }
             }

@@ -11,11 +11,14 @@
 //! ([`LogOddsMap::write_bt`]), which OctoMap's tools and `octovis` read.
 //!
 //! Differences from OctoMap, all deliberate:
-//! * log-odds are fixed point (`i16`, 1/1024 units, [`LOG_ODDS_SCALE`]) instead of `f32`:
-//!   integer additions make the map independent of update order and thread count; each
-//!   stored value is within 0.0005 of OctoMap's float;
-//! * storage is a hash of 4 x 4 x 4 bricks rather than a pointer octree (about 2 bytes
-//!   per voxel in free space, no pointer per node), with no multi-resolution queries;
+//! * storage is a hash of 4 x 4 x 4 bricks of `f32` log-odds rather than a pointer octree
+//!   (about 4 bytes per voxel in free space, no pointer per node), with no
+//!   multi-resolution queries and no pruning in memory; the arithmetic is OctoMap's (`f32`
+//!   sums clamped after each update, one update per voxel per scan, in scan order), so
+//!   the map is the same for any thread count;
+//! * keys are limited to OctoMap's 16-bit range (±32,768 voxels per axis, ±1.6 km at
+//!   0.05 m), so every map can be written as a `.bt`; a ray whose endpoint (or cut point)
+//!   lies outside is skipped whole, as OctoMap skips it;
 //! * the voxel traversal is olmap's exact one ([`crate::occupancy::VoxelRay`]); OctoMap's
 //!   stepping differs on rays through voxel corners and edges, so a few voxels near such
 //!   rays are classified differently.
@@ -26,7 +29,7 @@ mod model;
 mod pipeline;
 
 pub use insert::{LogOddsInsertStats, MAX_BRICKS};
-pub use model::{logit, LogOddsModel, LOG_ODDS_SCALE};
+pub use model::{logit, LogOddsModel};
 pub use pipeline::{run_free_space, FreeSpaceJob, FreeSpaceReport, FreeSpaceRun};
 
 use std::path::Path;
@@ -35,7 +38,7 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use self::bricks::{join, split, Bricks, BRICK_VOXELS};
-use self::model::{Quantised, UNKNOWN};
+use self::model::{is_unknown, F32Model, UNKNOWN};
 use crate::error::{Error, Result};
 use crate::geometry::VoxelKey;
 
@@ -99,7 +102,7 @@ impl LogOddsStats {
 pub struct LogOddsMap {
     resolution: f64,
     model: LogOddsModel,
-    quantised: Quantised,
+    f32_model: F32Model,
     bricks: Bricks,
     voxels: usize,
     /// [`MAX_BRICKS`], lowered by tests.
@@ -130,7 +133,7 @@ impl LogOddsMap {
         Ok(LogOddsMap {
             resolution,
             model,
-            quantised: model.quantised(),
+            f32_model: model.f32_model(),
             bricks: Bricks::default(),
             voxels: 0,
             brick_limit: MAX_BRICKS,
@@ -157,16 +160,16 @@ impl LogOddsMap {
         self.voxels == 0
     }
 
-    fn raw(&self, key: &VoxelKey) -> i16 {
+    fn raw(&self, key: &VoxelKey) -> f32 {
         split(*key)
             .and_then(|(id, i)| self.bricks.get(id).map(|b| b[i]))
             .unwrap_or(UNKNOWN)
     }
 
-    fn classify(&self, v: i16) -> VoxelState {
-        if v == UNKNOWN {
+    fn classify(&self, v: f32) -> VoxelState {
+        if is_unknown(v) {
             VoxelState::Unknown
-        } else if v >= self.quantised.threshold {
+        } else if v >= self.f32_model.threshold {
             VoxelState::Occupied
         } else {
             VoxelState::Free
@@ -188,7 +191,7 @@ impl LogOddsMap {
     /// A voxel's log-odds, `None` when unknown.
     pub fn log_odds(&self, key: &VoxelKey) -> Option<f64> {
         let v = self.raw(key);
-        (v != UNKNOWN).then(|| f64::from(v) / f64::from(LOG_ODDS_SCALE))
+        (!is_unknown(v)).then(|| f64::from(v))
     }
 
     /// A voxel's occupancy probability, `None` when unknown.
@@ -202,7 +205,7 @@ impl LogOddsMap {
             brick
                 .iter()
                 .enumerate()
-                .filter(|(_, &v)| v != UNKNOWN)
+                .filter(|(_, &v)| !is_unknown(v))
                 .map(move |(i, &v)| (join(id, i), self.classify(v)))
         })
     }
@@ -213,7 +216,7 @@ impl LogOddsMap {
         for (_, brick) in self.bricks.iter() {
             occupied += brick
                 .iter()
-                .filter(|&&v| v != UNKNOWN && v >= self.quantised.threshold)
+                .filter(|&&v| !is_unknown(v) && v >= self.f32_model.threshold)
                 .count();
         }
         LogOddsStats {
@@ -232,12 +235,31 @@ impl LogOddsMap {
 
     /// Writes the map as an OctoMap `.bt` tree with its free and occupied voxels
     /// (maximum likelihood, pruned: eight children of one state become one leaf), the file
-    /// complete or not at all. A voxel outside OctoMap's 16-bit key range is
-    /// [`Error::InvalidArgument`] (nothing written). Memory: 8 bytes per known voxel while
-    /// writing.
+    /// complete or not at all (every key is within OctoMap's range). Memory while writing:
+    /// 8 bytes per known voxel (their sorted Morton codes) and the file's bytes.
     pub fn write_bt(&self, path: &Path) -> Result<crate::io::octomap_bt::BtStats> {
-        let voxels = self.voxels().map(|(k, s)| (k, s == VoxelState::Occupied));
+        let voxels = Counted {
+            inner: self.voxels().map(|(k, s)| (k, s == VoxelState::Occupied)),
+            left: self.voxels,
+        };
         crate::io::octomap_bt::write_classified_path(path, self.resolution, voxels)
+    }
+}
+
+/// An iterator of known length (the writer reserves its codes from the size hint).
+struct Counted<I> {
+    inner: I,
+    left: usize,
+}
+
+impl<I: Iterator> Iterator for Counted<I> {
+    type Item = I::Item;
+    fn next(&mut self) -> Option<I::Item> {
+        self.left = self.left.saturating_sub(1);
+        self.inner.next()
+    }
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        (self.left, Some(self.left))
     }
 }
 

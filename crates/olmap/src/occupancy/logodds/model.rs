@@ -1,17 +1,18 @@
 //! [`LogOddsModel`]: OctoMap's sensor model (hit and miss probabilities, clamping, the
-//! occupancy threshold, maximum range) and its fixed-point log-odds.
+//! occupancy threshold, maximum range) and its log-odds in `f32`, as OctoMap computes them.
 
 use crate::error::{Error, Result};
 
-/// Log-odds are stored as `i16` in units of `1 / LOG_ODDS_SCALE`: exact integer additions
-/// and clamping, so a map does not depend on the order of updates or the thread count.
-pub const LOG_ODDS_SCALE: f32 = 1024.0;
+/// The stored value of a voxel never observed (a NaN: no update ever makes one).
+pub(super) const UNKNOWN: f32 = f32::NAN;
 
-/// The stored value of a voxel never observed.
-pub(super) const UNKNOWN: i16 = i16::MIN;
+/// Whether a stored value is [`UNKNOWN`].
+#[inline]
+pub(super) fn is_unknown(v: f32) -> bool {
+    v.is_nan()
+}
 
-/// The largest log-odds magnitude a model may use (clamping bounds and updates): the
-/// fixed-point range less a margin.
+/// The largest log-odds magnitude a model may use (clamping bounds and updates).
 const MAX_LOG_ODDS: f64 = 30.0;
 
 /// The probabilistic sensor model of a log-odds map, with OctoMap's defaults and
@@ -68,27 +69,36 @@ pub fn logit(p: f64) -> f64 {
     (p / (1.0 - p)).ln()
 }
 
-/// A model in fixed point: what insertion and queries use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct Quantised {
-    pub hit: i16,
-    pub miss: i16,
-    pub min: i16,
-    pub max: i16,
-    pub threshold: i16,
+/// A model's log-odds in `f32`, as OctoMap holds them (`logodds(double)` returns a
+/// float): what insertion and queries use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct F32Model {
+    pub hit: f32,
+    pub miss: f32,
+    pub min: f32,
+    pub max: f32,
+    pub threshold: f32,
 }
 
-impl Quantised {
-    /// A voxel's value after one observation (`delta` = `hit` or `miss`).
+impl F32Model {
+    /// A voxel's value after one observation (`delta` = `hit` or `miss`): OctoMap's
+    /// `updateNodeLogOdds`, a new voxel starting from 0, the sum clamped.
     #[inline]
-    pub fn update(&self, value: i16, delta: i16) -> i16 {
-        let base = if value == UNKNOWN { 0 } else { value };
-        base.saturating_add(delta).clamp(self.min, self.max)
+    pub fn update(&self, value: f32, delta: f32) -> f32 {
+        let base = if is_unknown(value) { 0.0 } else { value };
+        let v = base + delta;
+        if v < self.min {
+            self.min
+        } else if v > self.max {
+            self.max
+        } else {
+            v
+        }
     }
 }
 
-fn quantise(l: f64) -> i16 {
-    (l * f64::from(LOG_ODDS_SCALE)).round() as i16
+fn to_f32(l: f64) -> f32 {
+    l as f32
 }
 
 impl LogOddsModel {
@@ -131,14 +141,14 @@ impl LogOddsModel {
         }
     }
 
-    /// The model in fixed point (call after [`LogOddsModel::validate`]).
-    pub(super) fn quantised(&self) -> Quantised {
-        Quantised {
-            hit: quantise(logit(self.prob_hit)),
-            miss: quantise(logit(self.prob_miss)),
-            min: quantise(logit(self.clamp_min)),
-            max: quantise(logit(self.clamp_max)),
-            threshold: quantise(logit(self.occupancy_threshold)),
+    /// The model's log-odds in `f32` (call after [`LogOddsModel::validate`]).
+    pub(super) fn f32_model(&self) -> F32Model {
+        F32Model {
+            hit: to_f32(logit(self.prob_hit)),
+            miss: to_f32(logit(self.prob_miss)),
+            min: to_f32(logit(self.clamp_min)),
+            max: to_f32(logit(self.clamp_max)),
+            threshold: to_f32(logit(self.occupancy_threshold)),
         }
     }
 }
@@ -148,16 +158,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn octomap_defaults_in_fixed_point() {
-        let q = LogOddsModel::default().quantised();
-        // logit(0.7) = 0.8473, logit(0.4) = -0.4055, logit(0.1192) = -1.9996,
-        // logit(0.971) = 3.5110: within half a unit of the scale.
-        assert_eq!((q.hit, q.miss, q.threshold), (868, -415, 0));
-        assert_eq!((q.min, q.max), (-2048, 3595));
+    fn octomap_defaults_as_floats() {
+        let q = LogOddsModel::default().f32_model();
+        // logit(0.7) = 0.8473, logit(0.4) = -0.4055, logit(0.1192) = -2.0000,
+        // logit(0.971) = 3.5110.
+        assert!((q.hit - 0.847_298).abs() < 1e-6 && (q.miss + 0.405_465).abs() < 1e-6);
+        assert!((q.min + 2.000_028).abs() < 1e-6 && (q.max - 3.511_031).abs() < 1e-6);
+        assert_eq!(q.threshold, 0.0);
         // Clamped both ways, and an unknown voxel starts from 0.
-        assert_eq!(q.update(UNKNOWN, q.miss), -415);
-        assert_eq!(q.update(3500, q.hit), 3595);
-        assert_eq!(q.update(-2000, q.miss), -2048);
+        assert_eq!(q.update(UNKNOWN, q.miss), q.miss);
+        assert_eq!(q.update(3.0, q.hit), q.max);
+        assert_eq!(q.update(-1.9, q.miss), q.min);
     }
 
     #[test]

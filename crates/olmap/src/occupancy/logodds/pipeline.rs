@@ -139,9 +139,14 @@ pub fn run_free_space(job: &FreeSpaceJob, progress: Progress<'_>) -> Result<Free
         let cloud = io::read_cloud_with(path, &job.read)?.cloud;
         points += cloud.len();
         let t = Instant::now();
-        let s = map
-            .insert_scan(&cloud, pose)
-            .map_err(|e| Error::InvalidArgument(format!("{}: {e}", path.display())))?;
+        let s = map.insert_scan(&cloud, pose).map_err(|e| match e {
+            // The kind stays; the message names the cloud.
+            Error::TooLarge { what, limit } => Error::TooLarge {
+                what: format!("{}: {what}", path.display()),
+                limit,
+            },
+            e => Error::InvalidArgument(format!("{}: {e}", path.display())),
+        })?;
         insert_seconds += t.elapsed().as_secs_f64();
         total.add(&s);
         if job.scan_graph.is_some() {
