@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
-use nalgebra::Point3;
+use nalgebra::Vector3;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use olmap::geometry::{Pose, VoxelKey};
@@ -13,6 +13,7 @@ use pyo3::prelude::*;
 
 use crate::convert::{self, array_n3, cloud_arg, to_python};
 use crate::errors::IntoPy;
+use crate::map::as_stored;
 use crate::threads::detached;
 
 /// A voxel's state as a number in the arrays: 0 unknown, 1 free, 2 occupied.
@@ -159,7 +160,7 @@ impl PyFreeSpaceMap {
             let map = self.read();
             rows.rows()
                 .into_iter()
-                .map(|r| code(map.state_at(&as_stored(r[0], r[1], r[2]))))
+                .map(|r| code(map.state_at(&as_stored(Vector3::new(r[0], r[1], r[2])))))
                 .collect()
         });
         Ok(states.into_pyarray(py))
@@ -179,7 +180,7 @@ impl PyFreeSpaceMap {
             rows.rows()
                 .into_iter()
                 .map(|r| {
-                    VoxelKey::from_point(&as_stored(r[0], r[1], r[2]), res)
+                    VoxelKey::from_point(&as_stored(Vector3::new(r[0], r[1], r[2])), res)
                         .and_then(|k| map.probability(&k))
                         .unwrap_or(f64::NAN)
                 })
@@ -224,13 +225,4 @@ impl PyFreeSpaceMap {
         py.detach(|| self.read().write_bt(&path)).py_err()?;
         Ok(())
     }
-}
-
-/// A query point as the map stores points: rounded to float32.
-fn as_stored(x: f64, y: f64, z: f64) -> Point3<f64> {
-    Point3::new(
-        f64::from(x as f32),
-        f64::from(y as f32),
-        f64::from(z as f32),
-    )
 }

@@ -309,7 +309,7 @@ impl PyOccupancyMap {
 
 /// A query point as the map stores points: rounded to float32 (the precision of every
 /// olmap cloud), so that a point looks up the voxel its insertion filled.
-fn as_stored(p: Vector3<f64>) -> Point3<f64> {
+pub(crate) fn as_stored(p: Vector3<f64>) -> Point3<f64> {
     Point3::new(
         f64::from(p.x as f32),
         f64::from(p.y as f32),

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::bail;
 use clap::{ArgGroup, Args};
-use olmap::occupancy::QueryReport;
+use olmap::occupancy::{MapFormat, QueryReport};
 
 use super::render::read;
 use crate::args::parse_numbers;
@@ -61,10 +61,7 @@ pub fn run(a: &QueryArgs) -> anyhow::Result<ExitCode> {
     };
     // A .bt tree with free nodes (`olmap voxelize --free-space`, OctoMap's own maps) also
     // tells free from unknown.
-    let is_bt = a
-        .map
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("bt"));
+    let is_bt = MapFormat::from_path(&a.map) == Some(MapFormat::OctomapBt);
     let asks_state = a.at.is_some() || a.segment.is_some();
     let report = if is_bt && asks_state {
         let index = olmap::io::octomap_bt::read_leaves_path(&a.map)?.index();

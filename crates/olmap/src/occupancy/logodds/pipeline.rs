@@ -11,7 +11,7 @@ use super::{LogOddsInsertStats, LogOddsMap, LogOddsModel};
 use crate::error::{Error, Result};
 use crate::file::{write_atomic, OutputSet};
 use crate::io::{self, ReadOptions};
-use crate::occupancy::{cloud_poses, CloudPoses};
+use crate::occupancy::{cloud_poses, CloudPoses, MapFormat};
 use crate::progress::{Progress, Stage};
 
 /// What to insert and where the map goes.
@@ -111,11 +111,7 @@ pub struct FreeSpaceRun {
 /// ```
 pub fn run_free_space(job: &FreeSpaceJob, progress: Progress<'_>) -> Result<FreeSpaceRun> {
     let start = Instant::now();
-    let is_bt = job
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("bt"));
-    if !is_bt {
+    if MapFormat::from_path(&job.output) != Some(MapFormat::OctomapBt) {
         return Err(Error::InvalidArgument(format!(
             "{}: a map with free space is written as an OctoMap .bt file (.olm holds occupied \
              voxels only)",
