@@ -27,8 +27,8 @@ pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
-    localize, register, register_to, register_to_prepared, register_to_split, RegisterParams,
-    Registration, REFINE_REACH_CELLS,
+    localize, register, register_to, register_to_prepared, register_to_prepared_or_widen,
+    register_to_split, OnWindowEdge, RegisterParams, Registration, REFINE_REACH_CELLS,
 };
 pub use report::{
     matrix_rows, AgreementJson, AlignmentReport, DegeneracyJson, HypothesisJson, LevelJson,

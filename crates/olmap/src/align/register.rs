@@ -12,7 +12,7 @@ use super::verdict::{
     agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, window_doubts,
     TrustThresholds,
 };
-use super::verify::{verify, RefineAgainst, Verification};
+use super::verify::{starts, verify, RefineAgainst, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -98,12 +98,23 @@ fn finish(
     search: Alignment,
     params: &RegisterParams,
     start: Instant,
+    on_edge: OnWindowEdge,
 ) -> Result<Registration> {
     let resolution = against.target.resolution();
     // A search that already fails its own tests is not refined: ICP cannot make a barely
     // overlapping match trustworthy, and skipping it saves the most expensive part of
     // every hopeless attempt (map building tries many).
     let mut doubts = search_doubts(&search, &params.trust);
+    if let (OnWindowEdge::Widen { inner }, true) = (on_edge, doubts.is_empty()) {
+        // Only when every hypothesis the verification would refine starts there: then the
+        // verdict would doubt whichever won (its start on the edge, or a refinement that
+        // reaches the inner part moving farther than it accepts).
+        let shift = params.trust.max_refine_shift_cells * resolution;
+        let outside = |p: &Pose| !widen_doubts(p, &params.search, inner, shift).is_empty();
+        if starts(&search).iter().all(|c| outside(&c.pose)) {
+            doubts.extend(widen_doubts(&search.pose, &params.search, inner, shift));
+        }
+    }
     let verification = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {
         (Some(p), true) => {
             let icp = refinement_after_search(p, resolution);
@@ -205,6 +216,48 @@ pub fn register_to_split(
     )
 }
 
+/// What a registration in a [`super::Region::Window`] does when the search's best pose lies
+/// on the window's edge (the optimum may lie outside it).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum OnWindowEdge {
+    /// Refine and verify as usual; the verdict doubts a winner that started on the edge.
+    #[default]
+    Refine,
+    /// Skip the refinement and the verification when the search's best pose lies on the
+    /// window's edge, or so far from the prior in x or y that no refinement the verdict
+    /// accepts ([`super::TrustThresholds::max_refine_shift_cells`]) could bring it within
+    /// `inner` times the window's half-width (`inner` = 1: the edge alone): the result is
+    /// the search's, untrusted, with the reason as its doubt. For a caller that searches a
+    /// wider window next and trusts only a match in the inner part of a window (the
+    /// mapper's growing odometry windows): refining a pose it will search again is the
+    /// most expensive part of the attempt.
+    Widen {
+        /// The inner part of the window, as a fraction of its half-width in x and y.
+        inner: f64,
+    },
+}
+
+/// The doubt of [`OnWindowEdge::Widen`] about a hypothesis starting at `pose`, if any;
+/// `shift` is the largest refinement move the verdict accepts, metres.
+fn widen_doubts(pose: &Pose, params: &SearchParams, inner: f64, shift: f64) -> Vec<String> {
+    let mut doubts = window_doubts(pose, params);
+    if let (true, super::Region::Window { xy, .. }) = (doubts.is_empty(), params.region) {
+        let d = pose.translation() - params.prior.translation();
+        let reach = inner * xy + shift;
+        if d.x.abs() > reach || d.y.abs() > reach {
+            doubts.push(format!(
+                "the search's best pose lies outside the inner {:.0} % of the window by more \
+                 than a refinement may move it ({:+.2}, {:+.2} m from the prior; window \
+                 ±{xy:.2} m): a wider window searches there",
+                100.0 * inner,
+                d.x,
+                d.y
+            ));
+        }
+    }
+    doubts
+}
+
 /// [`register_to_split`] with the refinement's target points already prepared for ICP
 /// when `prepared` is given (made from `refine_target` with `params.refine`'s target
 /// parameters): what a mapper that registers many scans against one map keeps between
@@ -221,6 +274,28 @@ pub fn register_to_prepared(
     prepared: Option<&IcpTarget>,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    register_to_prepared_or_widen(
+        search_source,
+        refine_source,
+        target,
+        refine_target,
+        prepared,
+        params,
+        OnWindowEdge::Refine,
+    )
+}
+
+/// [`register_to_prepared`], saying what to do when a window search's best pose lies on
+/// the window's edge ([`OnWindowEdge`]).
+pub fn register_to_prepared_or_widen(
+    search_source: &PointCloud,
+    refine_source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    prepared: Option<&IcpTarget>,
+    params: &RegisterParams,
+    on_edge: OnWindowEdge,
+) -> Result<Registration> {
     let start = Instant::now();
     let search = global_search(search_source, target, &params.search)?;
     finish(
@@ -233,6 +308,7 @@ pub fn register_to_prepared(
         search,
         params,
         start,
+        on_edge,
     )
 }
 
@@ -267,5 +343,6 @@ pub fn localize(
         search,
         params,
         start,
+        OnWindowEdge::Refine,
     )
 }

@@ -1,5 +1,7 @@
 //! What a search aligns against: a map pyramid, and the free space seen by its scans.
 
+use std::sync::OnceLock;
+
 use super::score::DenseGrid;
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -22,14 +24,25 @@ pub const FREE_SPACE_MARGIN: f64 = 0.3;
 pub struct SearchTarget {
     pub(crate) pyramid: Pyramid,
     pub(crate) free: Vec<Option<DenseGrid>>,
+    /// Per level, the occupied voxels as a dense grid, made when the agreement
+    /// ([`super::consistency`]) first asks for it and dropped when a scan is added.
+    occupied: Vec<OnceLock<Option<DenseGrid>>>,
 }
+
+/// The largest box, in cells, of a level's [`SearchTarget::occupied_grid`] (2^28 bits =
+/// 32 MiB; larger maps answer from the hash).
+const MAX_OCCUPIED_GRID_CELLS: u64 = 1 << 28;
 
 impl SearchTarget {
     /// A target from a map alone (no free space known).
     pub fn from_map(map: OccupancyList, levels: usize) -> Result<Self> {
         let pyramid = Pyramid::new(map, levels)?;
         let free = (0..levels).map(|_| None).collect();
-        Ok(SearchTarget { pyramid, free })
+        Ok(SearchTarget {
+            pyramid,
+            free,
+            occupied: (0..levels).map(|_| OnceLock::new()).collect(),
+        })
     }
 
     /// A target from one scan in its own frame: endpoints voxelised at `resolution`, and
@@ -47,6 +60,7 @@ impl SearchTarget {
         let mut t = SearchTarget {
             pyramid: Pyramid::new(OccupancyList::new(resolution)?, levels)?,
             free: (0..levels).map(|_| None).collect(),
+            occupied: (0..levels).map(|_| OnceLock::new()).collect(),
         };
         for (c, pose) in scans {
             t.add_scan(c, pose)?;
@@ -65,6 +79,9 @@ impl SearchTarget {
         endpoints.check_keys(cloud, pose, "the target")?;
         endpoints.add_points(cloud, pose, 1);
         self.pyramid.merge(&endpoints)?;
+        self.occupied = (0..self.pyramid.levels())
+            .map(|_| OnceLock::new())
+            .collect();
         for level in 0..self.pyramid.levels() {
             let grid = self.free[level].take();
             self.free[level] = add_free_space(grid, cloud, pose, self.pyramid.level(level));
@@ -76,6 +93,14 @@ impl SearchTarget {
     /// (whatever [`super::SearchParams::resolution`] says).
     pub fn resolution(&self) -> f64 {
         self.pyramid.base().resolution()
+    }
+
+    /// The occupied voxels of a level as a dense grid (one bit read per lookup), made on
+    /// first use; `None` when the level's box is too large for one.
+    pub(crate) fn occupied_grid(&self, level: usize) -> Option<&DenseGrid> {
+        self.occupied[level]
+            .get_or_init(|| DenseGrid::occupied(self.pyramid.level(level), MAX_OCCUPIED_GRID_CELLS))
+            .as_ref()
     }
 
     /// The map pyramid.

@@ -163,7 +163,7 @@ fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
 
 /// The search's best and up to `MAX_HYPOTHESES - 1` distinct rivals scoring at least
 /// [`VERIFY_MIN_RATIO`] of it: its other cluster heads, then its runner-up.
-fn starts(search: &Alignment) -> Vec<Candidate> {
+pub(super) fn starts(search: &Alignment) -> Vec<Candidate> {
     let best = Candidate {
         pose: search.pose,
         overlap: search.overlap,

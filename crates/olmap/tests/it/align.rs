@@ -256,3 +256,55 @@ fn same_input_same_output_on_any_thread_count() {
     );
     assert_eq!(many.search.evaluated, single.search.evaluated);
 }
+
+/// A window search whose best pose lies outside the inner half of the window, farther than
+/// a refinement may move it (3 cells), is not refined when the caller widens instead
+/// ([`align::OnWindowEdge::Widen`]): untrusted, with the reason, and no refinement; the same
+/// search refined as usual is refined. Inside the inner half, widening changes nothing.
+/// 3DTK 1->0, window ±1.5 m / ±5° around priors 1.2 m and 0.1 m off the reference in x.
+#[test]
+fn a_window_match_in_the_outer_half_is_not_refined_when_the_caller_widens() {
+    if data().is_none() {
+        return;
+    }
+    let refs = olmap::test_data::threedtk_reference().expect("the data folder was found");
+    let (src, dst) = (tdk(1), tdk(0));
+    let reference = refs.poses[0].pose.inverse() * refs.poses[1].pose;
+    let target = align::SearchTarget::from_cloud(&dst, 0.1, 4).unwrap();
+    let run = |off: f64, on_edge: align::OnWindowEdge| {
+        let mut p = params(Dof::XyzYaw);
+        p.search.prior = reference * Pose::from_xyz_ypr(off, 0.0, 0.0, 0.0, 0.0, 0.0);
+        p.search.region = align::Region::Window {
+            xy: 1.5,
+            z: 0.3,
+            yaw: 5f64.to_radians(),
+        };
+        align::register_to_prepared_or_widen(&src, &src, &target, &dst, None, &p, on_edge).unwrap()
+    };
+    let widen = align::OnWindowEdge::Widen { inner: 0.5 };
+    let outer = run(1.2, widen);
+    assert!(
+        !outer.trusted && outer.refinement.is_none(),
+        "{:?}",
+        outer.doubts
+    );
+    assert!(
+        outer.doubts.iter().any(|d| d.contains("inner 50 %")),
+        "{:?}",
+        outer.doubts
+    );
+    let refined = run(1.2, align::OnWindowEdge::Refine);
+    assert!(refined.refinement.is_some());
+    let inner = run(0.1, widen);
+    assert!(
+        inner.refinement.is_some() && inner.trusted,
+        "{:?}",
+        inner.doubts
+    );
+    let e = PoseError::between(&inner.pose, &reference);
+    // Data README §1.7: 5 cm / 1 deg in x, y, yaw.
+    assert!(
+        e.dx_m.abs() < 0.05 && e.dy_m.abs() < 0.05 && e.yaw_deg.abs() < 1.0,
+        "{e:?}"
+    );
+}

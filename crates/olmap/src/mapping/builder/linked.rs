@@ -50,6 +50,7 @@ impl State<'_> {
                 return Ok(Some(Found {
                     registration: r,
                     via,
+                    window: None,
                 }));
             }
             if let ScanLink::Mutual { other, .. } = link {
@@ -57,6 +58,7 @@ impl State<'_> {
                     return Ok(Some(Found {
                         registration: alone,
                         via: Placement::MutualSighting { other: *other },
+                        window: None,
                     }));
                 }
             }

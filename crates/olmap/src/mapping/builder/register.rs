@@ -6,7 +6,9 @@ use std::sync::atomic::Ordering;
 use super::state::State;
 use crate::align::icp::{IcpParams, IcpTarget};
 use crate::align::verify::same_solution;
-use crate::align::{register_to_prepared, Region, RegisterParams, Registration};
+use crate::align::{
+    register_to_prepared_or_widen, OnWindowEdge, Region, RegisterParams, Registration,
+};
 use crate::error::Result;
 use crate::geometry::Pose;
 use crate::mapping::links::Placement;
@@ -18,6 +20,9 @@ pub(super) struct Found {
     pub(super) registration: Registration,
     /// The search that found it: a sighting, odometry or a global search.
     pub(super) via: Placement,
+    /// The odometry window whose search found it, when one did: its prior and its x-y and
+    /// yaw half-widths (metres, radians).
+    pub(super) window: Option<(Pose, f64, f64)>,
 }
 
 /// Keeps `r` as the best so far when nothing is kept yet or it overlaps the map more.
@@ -29,6 +34,7 @@ pub(super) fn keep_better(best: &mut Option<Found>, r: Registration, via: Placem
         *best = Some(Found {
             registration: r,
             via,
+            window: None,
         });
     }
 }
@@ -62,7 +68,15 @@ impl State<'_> {
                     z: z * grow,
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
-                let mut r = self.run(s, &params)?;
+                // Before the last window, a search whose best lies in the outer half (where
+                // a match is not trusted here) is not refined: the next, wider window
+                // searches there again.
+                let on_edge = if i < last {
+                    OnWindowEdge::Widen { inner: 0.5 }
+                } else {
+                    OnWindowEdge::Refine
+                };
+                let mut r = self.run_or_widen(s, &params, on_edge)?;
                 check_odometry(&mut r, &prior, tolerance);
                 if r.trusted && in_outer_half(&r, &prior, xy * grow) {
                     if i < last {
@@ -96,6 +110,7 @@ impl State<'_> {
                     return Ok(Found {
                         registration: r,
                         via: Placement::Odometry,
+                        window: Some((prior, xy * grow, (yaw * grow).min(std::f64::consts::PI))),
                     });
                 }
                 keep_better(&mut best, r, Placement::Odometry);
@@ -118,6 +133,7 @@ impl State<'_> {
             _ => Ok(Found {
                 registration: r,
                 via: Placement::Global,
+                window: None,
             }),
         }
     }
@@ -150,18 +166,29 @@ impl State<'_> {
     /// One registration of scan `s` against the map (searching with its registration
     /// cloud, refining with the whole scan), counted.
     pub(super) fn run(&self, s: usize, params: &RegisterParams) -> Result<Registration> {
+        self.run_or_widen(s, params, OnWindowEdge::Refine)
+    }
+
+    /// [`State::run`], saying what a window search whose best lies on the edge does.
+    pub(super) fn run_or_widen(
+        &self,
+        s: usize,
+        params: &RegisterParams,
+        on_edge: OnWindowEdge,
+    ) -> Result<Registration> {
         self.registrations.fetch_add(1, Ordering::Relaxed);
         let prepared = match &params.refine {
             Some(icp) => Some(self.prepared_map(icp)?),
             None => None,
         };
-        register_to_prepared(
+        register_to_prepared_or_widen(
             &self.clouds[s],
             &self.scans[s].cloud,
             &self.target,
             &self.refine_map,
             prepared,
             params,
+            on_edge,
         )
     }
 }
