@@ -44,6 +44,9 @@ import statistics
 import subprocess
 import sys
 import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from common import loadavg, run  # noqa: E402
 import time
 
 ICP_VOXEL = 0.05
@@ -229,20 +232,6 @@ def worker(method, source, target, voxel):
 
 
 # ----------------------------------------------------------------------------- the run
-
-def run(cmd, env=None):
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    if out.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{out.stderr}")
-    return out.stdout
-
-
-def loadavg():
-    try:
-        return os.getloadavg()[0]
-    except OSError:
-        return float("nan")
-
 
 def pinned(cmd, core):
     return (["taskset", "-c", str(core)] + cmd) if shutil.which("taskset") else cmd

@@ -25,6 +25,9 @@ import subprocess
 import sys
 import tempfile
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from common import loadavg, run  # noqa: E402
+
 
 def cases(data):
     tdk = os.path.join(data, "3dtk_dat")
@@ -34,20 +37,6 @@ def cases(data):
         ("scan.dat (1 scan, 88k points)", [os.path.join(data, "octomap_share_data", "scan.dat")], []),
         ("3DTK 000-002 (3 scans, 234k points)", scans, ["--poses", frames, "--3dtk-valid"]),
     ]
-
-
-def run(cmd):
-    out = subprocess.run(cmd, capture_output=True, text=True)
-    if out.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{out.stderr}")
-    return out.stdout
-
-
-def loadavg():
-    try:
-        return os.getloadavg()[0]
-    except OSError:
-        return float("nan")
 
 
 def main():
