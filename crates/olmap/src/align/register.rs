@@ -105,7 +105,10 @@ fn finish(
     // overlapping match trustworthy, and skipping it saves the most expensive part of
     // every hopeless attempt (map building tries many).
     let mut doubts = search_doubts(&search, &params.trust);
-    if let (OnWindowEdge::Widen { inner }, true) = (on_edge, doubts.is_empty()) {
+    // Without a refinement nothing is skipped (and the verdict has no window test).
+    if let (OnWindowEdge::Widen { inner }, true, true) =
+        (on_edge, doubts.is_empty(), params.refine.is_some())
+    {
         // Only when every hypothesis the verification would refine starts there: then the
         // verdict would doubt whichever won (its start on the edge, or a refinement that
         // reaches the inner part moving farther than it accepts).
@@ -230,7 +233,8 @@ pub enum OnWindowEdge {
     /// the search's, untrusted, with the reason as its doubt. For a caller that searches a
     /// wider window next and trusts only a match in the inner part of a window (the
     /// mapper's growing odometry windows): refining a pose it will search again is the
-    /// most expensive part of the attempt.
+    /// most expensive part of the attempt. Without a refinement (`refine: None`) it is
+    /// [`OnWindowEdge::Refine`].
     Widen {
         /// The inner part of the window, as a fraction of its half-width in x and y.
         inner: f64,

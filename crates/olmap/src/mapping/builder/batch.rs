@@ -9,7 +9,7 @@ use super::state::{footprint, overlaps, State};
 use super::{placed_record, Placing};
 use crate::align::Registration;
 use crate::error::Result;
-use crate::geometry::{Aabb, Pose};
+use crate::geometry::Aabb;
 use crate::mapping::links::Placement;
 use crate::occupancy::OccupancyList;
 
@@ -25,8 +25,6 @@ struct Candidate {
     via: Placement,
     /// The scan's box in the map at the registration's pose.
     footprint: Option<Aabb>,
-    /// The odometry window that found it ([`Found::window`]).
-    window: Option<(Pose, f64, f64)>,
 }
 
 /// What the batch mapper knows about one scan not yet placed.
@@ -124,17 +122,12 @@ pub(super) fn place_best_first(
 
 /// [`State::register`] with the scan's footprint at the result: a cache entry.
 fn attempt(state: &State<'_>, s: usize, allow_global: bool) -> Result<Candidate> {
-    let Found {
-        registration,
-        via,
-        window,
-    } = state.register(s, allow_global)?;
+    let Found { registration, via } = state.register(s, allow_global)?;
     let footprint = footprint(&state.clouds[s], &registration.pose);
     Ok(Candidate {
         registration,
         via,
         footprint,
-        window,
     })
 }
 
@@ -286,7 +279,6 @@ impl Batch<'_, '_> {
             footprint: footprint(&self.state.clouds[s], &confirmed.pose),
             registration: confirmed,
             via: c.via,
-            window: c.window,
         };
         if !checked.registration.trusted {
             self.pending[s].cached = Some(checked);
@@ -308,19 +300,13 @@ impl Batch<'_, '_> {
         }
         // Scans of the same robot that now predict from this one (fewer moves, less drift)
         // search again around the better prediction: a result found around a prediction
-        // many moves old can be a look-alike place metres away. A trusted result that the
-        // better prediction confirms (in the inner half of its first window) is kept: the
-        // search there would find it again.
+        // many moves old can be a look-alike place metres away.
         for &u in unplaced {
             let by_odometry = self.pending[u]
                 .cached
                 .as_ref()
                 .is_some_and(|c| c.via.linked_scan().is_none());
-            if u != s
-                && by_odometry
-                && self.state.predicts_from(u) == Some(s)
-                && !self.confirmed_by_prediction(u)
-            {
+            if u != s && by_odometry && self.state.predicts_from(u) == Some(s) {
                 self.pending[u].forget();
             }
         }
@@ -344,34 +330,6 @@ impl Batch<'_, '_> {
             }
         }
         Ok(())
-    }
-
-    /// Whether a search around scan `u`'s new prediction would find its cached result
-    /// again: the result is trusted and was found in an odometry window, it lies in the
-    /// inner half (in x and y) of one of the windows the mapper would search around the
-    /// new prediction, and that window (in x, y and yaw) lies inside the one that found
-    /// it, so every rival the new search could see, the old one saw and refuted.
-    fn confirmed_by_prediction(&self, u: usize) -> bool {
-        let Some(c) = &self.pending[u].cached else {
-            return false;
-        };
-        let (true, Some((old, old_xy, old_yaw)), Some((prior, _))) =
-            (c.registration.trusted, c.window, self.state.predict(u))
-        else {
-            return false;
-        };
-        let (xy, _, yaw) = self.state.params.odometry_window;
-        let at = c.registration.pose.translation() - prior.translation();
-        let shift = prior.translation() - old.translation();
-        let turn = prior.rotation().angle_to(&old.rotation());
-        [1.0, 2.0, 4.0].into_iter().any(|grow: f64| {
-            let (half, half_yaw) = (xy * grow, (yaw * grow).min(std::f64::consts::PI));
-            let inner = at.x.abs() <= 0.5 * half && at.y.abs() <= 0.5 * half;
-            let inside = shift.x.abs() + half <= old_xy
-                && shift.y.abs() + half <= old_xy
-                && (old_yaw >= std::f64::consts::PI || turn + half_yaw <= old_yaw);
-            inner && inside
-        })
     }
 
     /// Refreshes scan `u`'s cached score at its pose against the map as it is now and marks

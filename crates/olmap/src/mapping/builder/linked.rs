@@ -50,7 +50,6 @@ impl State<'_> {
                 return Ok(Some(Found {
                     registration: r,
                     via,
-                    window: None,
                 }));
             }
             if let ScanLink::Mutual { other, .. } = link {
@@ -58,7 +57,6 @@ impl State<'_> {
                     return Ok(Some(Found {
                         registration: alone,
                         via: Placement::MutualSighting { other: *other },
-                        window: None,
                     }));
                 }
             }

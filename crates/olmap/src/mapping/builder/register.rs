@@ -20,9 +20,6 @@ pub(super) struct Found {
     pub(super) registration: Registration,
     /// The search that found it: a sighting, odometry or a global search.
     pub(super) via: Placement,
-    /// The odometry window whose search found it, when one did: its prior and its x-y and
-    /// yaw half-widths (metres, radians).
-    pub(super) window: Option<(Pose, f64, f64)>,
 }
 
 /// Keeps `r` as the best so far when nothing is kept yet or it overlaps the map more.
@@ -34,7 +31,6 @@ pub(super) fn keep_better(best: &mut Option<Found>, r: Registration, via: Placem
         *best = Some(Found {
             registration: r,
             via,
-            window: None,
         });
     }
 }
@@ -68,9 +64,9 @@ impl State<'_> {
                     z: z * grow,
                     yaw: (yaw * grow).min(std::f64::consts::PI),
                 };
-                // Before the last window, a search whose best lies in the outer half (where
-                // a match is not trusted here) is not refined: the next, wider window
-                // searches there again.
+                // Before the last window, a search whose every hypothesis starts on the edge
+                // or too far into the outer half (where a match is not trusted here) is not
+                // refined: the next, wider window searches there again.
                 let on_edge = if i < last {
                     OnWindowEdge::Widen { inner: 0.5 }
                 } else {
@@ -110,7 +106,6 @@ impl State<'_> {
                     return Ok(Found {
                         registration: r,
                         via: Placement::Odometry,
-                        window: Some((prior, xy * grow, (yaw * grow).min(std::f64::consts::PI))),
                     });
                 }
                 keep_better(&mut best, r, Placement::Odometry);
@@ -133,7 +128,6 @@ impl State<'_> {
             _ => Ok(Found {
                 registration: r,
                 via: Placement::Global,
-                window: None,
             }),
         }
     }
