@@ -112,10 +112,12 @@ fn finish(
         // Only when every hypothesis the verification would refine starts there: then the
         // verdict would doubt whichever won (its start on the edge, or a refinement that
         // reaches the inner part moving farther than it accepts).
+        // (The first start is the search's best.)
         let shift = params.trust.max_refine_shift_cells * resolution;
+        let best = widen_doubts(&search.pose, &params.search, inner, shift);
         let outside = |p: &Pose| !widen_doubts(p, &params.search, inner, shift).is_empty();
-        if starts(&search).iter().all(|c| outside(&c.pose)) {
-            doubts.extend(widen_doubts(&search.pose, &params.search, inner, shift));
+        if !best.is_empty() && starts(&search).iter().skip(1).all(|c| outside(&c.pose)) {
+            doubts.extend(best);
         }
     }
     let verification = match (&params.refine, search.overlap > 0 && doubts.is_empty()) {

@@ -32,22 +32,14 @@ impl DenseGrid {
     /// The voxels of a list with a count above zero, over their key box, or `None` when
     /// there are none or the box holds more than `max_cells` cells.
     pub fn occupied(list: &OccupancyList, max_cells: u64) -> Option<Self> {
-        let mut lo = [i64::MAX; 3];
-        let mut hi = [i64::MIN; 3];
-        for (k, _) in list.iter().filter(|(_, c)| *c > 0) {
-            for (i, v) in [k.x, k.y, k.z].into_iter().enumerate() {
-                lo[i] = lo[i].min(v as i64);
-                hi[i] = hi[i].max(v as i64);
-            }
-        }
-        let cells = (0..3).try_fold(1u64, |n, i| {
-            (hi[i] >= lo[i]).then(|| n.checked_mul((hi[i] - lo[i] + 1) as u64))?
-        })?;
+        let occupied = || list.iter().filter(|(_, c)| *c > 0);
+        let (lo, hi) = Self::box_of(occupied())?;
+        let cells = (0..3).try_fold(1u64, |n, i| n.checked_mul((hi[i] - lo[i] + 1) as u64))?;
         if cells > max_cells {
             return None;
         }
         let mut g = Self::empty(lo, hi)?;
-        for (k, _) in list.iter().filter(|(_, c)| *c > 0) {
+        for (k, _) in occupied() {
             g.set(k.x as i64, k.y as i64, k.z as i64);
         }
         Some(g)
@@ -55,15 +47,24 @@ impl DenseGrid {
 
     /// The smallest key box `[lo, hi]` holding every voxel of a list (`None` when empty).
     pub fn key_box(list: &OccupancyList) -> Option<([i64; 3], [i64; 3])> {
+        Self::box_of(list.iter())
+    }
+
+    /// The smallest key box `[lo, hi]` holding every voxel of `voxels` (`None` when empty).
+    fn box_of(
+        voxels: impl Iterator<Item = (crate::geometry::VoxelKey, u16)>,
+    ) -> Option<([i64; 3], [i64; 3])> {
         let mut lo = [i64::MAX; 3];
         let mut hi = [i64::MIN; 3];
-        for (k, _) in list.iter() {
+        let mut any = false;
+        for (k, _) in voxels {
+            any = true;
             for (i, v) in [k.x, k.y, k.z].into_iter().enumerate() {
                 lo[i] = lo[i].min(v as i64);
                 hi[i] = hi[i].max(v as i64);
             }
         }
-        (!list.is_empty()).then_some((lo, hi))
+        any.then_some((lo, hi))
     }
 
     /// The voxels of a list over the key box `[lo, hi]` (voxels outside it are left out),
