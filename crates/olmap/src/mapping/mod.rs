@@ -14,8 +14,8 @@ pub mod posegraph;
 mod report;
 
 pub use builder::{
-    build_map, build_map_linked, fuse_scan_maps, MapBuild, MapMode, MapParams, PlacedScan,
-    RejectedScan, ScanInput, ScanMap,
+    build_map, build_map_linked, fuse_scan_maps, IncrementalMapper, MapBuild, MapMode, MapParams,
+    PlacedScan, RejectedScan, ScanInput, ScanMap, ScanOutcome,
 };
 pub use eval::{
     evaluate, mean_median_max, position_histogram, ErrorSummary, Evaluation, HistogramBin,

@@ -120,7 +120,12 @@ impl TeamMap {
 
 /// The name a scan has in the joint map.
 pub fn scan_name(store: &ScanStore, robot: u32, seq: u32) -> String {
-    format!("{}/scan{seq:03}", store.robot_name(robot))
+    joint_name(&store.robot_name(robot), seq)
+}
+
+/// `ROBOT/scanNNN`.
+pub(super) fn joint_name(robot_name: &str, seq: u32) -> String {
+    format!("{robot_name}/scan{seq:03}")
 }
 
 /// Maps a team's merged scan store as one batch map (thesis §6.4-6.5). The frame is the
@@ -166,22 +171,9 @@ pub fn map_team(
     let mut cleared_points = 0;
     let mut inputs = Vec::with_capacity(scans.len());
     for s in &scans {
-        let mut cloud = s.cloud.clone();
-        if let (true, Some(c)) = (params.sightings, &params.clearing) {
-            let at: Vec<(f64, f64)> = s
-                .sightings
-                .iter()
-                .map(|g| (g.beacon.x, g.beacon.y))
-                .collect();
-            let (kept, removed) = clear_robots(&cloud, &at, c)?;
-            cloud = kept;
-            cleared_points += removed;
-        }
-        inputs.push(ScanInput {
-            name: scan_name(store, s.robot, s.seq),
-            cloud,
-            odometry: s.odometry,
-        });
+        let (input, removed) = team_scan_input(s, &store.robot_name(s.robot), params)?;
+        cleared_points += removed;
+        inputs.push(input);
     }
     let mut build = build_map_linked(&inputs, &params.map, &team, progress)?;
     let frames: Vec<RobotFrame> = robots
@@ -262,12 +254,12 @@ fn link_sightings(
 ) -> usize {
     // The scan of `robot` taken nearest to `time`, within the gap.
     let at = |robot: u32, time: f64| {
-        scans
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.robot == robot && (s.time - time).abs() <= params.max_time_gap)
-            .min_by(|a, b| (a.1.time - time).abs().total_cmp(&(b.1.time - time).abs()))
-            .map(|(i, _)| i)
+        nearest_in_time(
+            scans.iter().map(|s| (s.robot, s.time)).enumerate(),
+            robot,
+            time,
+            params.max_time_gap,
+        )
     };
     let mut rejected = 0;
     for (o, obs) in scans.iter().enumerate() {
@@ -275,34 +267,104 @@ fn link_sightings(
             let Some(t) = at(g.target, obs.time) else {
                 continue;
             };
-            links[t].push(ScanLink::SeenBy {
-                other: o,
-                beacon: g.beacon,
-            });
-            links[o].push(ScanLink::Saw {
-                other: t,
-                observed: g.beacon,
-            });
-            // A two-way sighting, handled once (from the lower robot id).
-            let back = scans[t].sightings.iter().find(|b| b.target == obs.robot);
-            if let (true, Some(back)) = (g.mutual && obs.robot < g.target, back) {
-                match mutual_relative(g, back, params) {
-                    Some(t_o_t) => {
-                        links[t].push(ScanLink::Mutual {
-                            other: o,
-                            relative: t_o_t,
-                        });
-                        links[o].push(ScanLink::Mutual {
-                            other: t,
-                            relative: t_o_t.inverse(),
-                        });
-                    }
-                    None => rejected += 1,
-                }
-            }
+            let ok = sighting_links((o, obs), g, (t, scans[t]), params, |i, l| links[i].push(l));
+            rejected += usize::from(!ok);
         }
     }
     rejected
+}
+
+/// The scan (index) of `robot` taken nearest to `time`, at most `gap` seconds away, among
+/// `(index, (robot, time))`; the first of equals.
+pub(super) fn nearest_in_time(
+    scans: impl Iterator<Item = (usize, (u32, f64))>,
+    robot: u32,
+    time: f64,
+    gap: f64,
+) -> Option<usize> {
+    scans
+        .filter(|(_, (r, t))| *r == robot && (t - time).abs() <= gap)
+        .min_by(|a, b| (a.1 .1 - time).abs().total_cmp(&(b.1 .1 - time).abs()))
+        .map(|(i, _)| i)
+}
+
+/// The links that sighting `g`, made at scan `o` of the robot of scan `t` (taken at the
+/// same moment), gives: `t` seen by `o` (6.2), `o` saw `t` (6.3), and when the sighting was
+/// two-way, handled once from the lower robot id, the relative pose both ways (6.4).
+/// `add(scan, link)` receives each. Returns false when the two-way sighting failed the
+/// distractor test (its one-way links are given).
+pub(super) fn sighting_links(
+    (o, obs): (usize, &StoredScan),
+    g: &StoredSighting,
+    (t, target): (usize, &StoredScan),
+    params: &TeamParams,
+    mut add: impl FnMut(usize, ScanLink),
+) -> bool {
+    add(
+        t,
+        ScanLink::SeenBy {
+            other: o,
+            beacon: g.beacon,
+        },
+    );
+    add(
+        o,
+        ScanLink::Saw {
+            other: t,
+            observed: g.beacon,
+        },
+    );
+    let back = target.sightings.iter().find(|b| b.target == obs.robot);
+    if let (true, Some(back)) = (g.mutual && obs.robot < g.target, back) {
+        let Some(t_o_t) = mutual_relative(g, back, params) else {
+            return false;
+        };
+        add(
+            t,
+            ScanLink::Mutual {
+                other: o,
+                relative: t_o_t,
+            },
+        );
+        add(
+            o,
+            ScanLink::Mutual {
+                other: t,
+                relative: t_o_t.inverse(),
+            },
+        );
+    }
+    true
+}
+
+/// A stored scan as the team mapper registers it: named `ROBOT/scanNNN` (`robot_name` is
+/// the robot's), the robots it saw cleared from its cloud when the parameters say so.
+/// Returns the input and the points cleared.
+pub(super) fn team_scan_input(
+    s: &StoredScan,
+    robot_name: &str,
+    params: &TeamParams,
+) -> Result<(ScanInput, usize)> {
+    let mut cloud = s.cloud.clone();
+    let mut removed = 0;
+    if let (true, Some(c)) = (params.sightings, &params.clearing) {
+        let at: Vec<(f64, f64)> = s
+            .sightings
+            .iter()
+            .map(|g| (g.beacon.x, g.beacon.y))
+            .collect();
+        let (kept, n) = clear_robots(&cloud, &at, c)?;
+        cloud = kept;
+        removed = n;
+    }
+    Ok((
+        ScanInput {
+            name: joint_name(robot_name, s.seq),
+            cloud,
+            odometry: s.odometry,
+        },
+        removed,
+    ))
 }
 
 /// `T_observer_target` (robot frames, same floor) from a two-way sighting, (6.4) with the

@@ -6,6 +6,7 @@
 mod clearing;
 #[cfg(feature = "render")]
 mod html;
+mod live;
 mod mapper;
 mod mutual;
 mod mutual_report;
@@ -16,6 +17,7 @@ mod store;
 pub use clearing::{clear_robots, ClearingParams};
 #[cfg(feature = "render")]
 pub use html::write_team_html;
+pub use live::LiveTeam;
 pub use mapper::{map_solo, map_team, scan_name, RobotFrame, TeamMap, TeamParams};
 pub use mutual::{
     expected_position_error, mutual_from_scans, mutual_pose, separations, MutualFix,

@@ -13,6 +13,7 @@ mod free_space;
 mod fuzz;
 mod graph;
 mod grid2d;
+mod incremental;
 #[cfg(feature = "las")]
 mod las;
 mod layers;
@@ -36,6 +37,27 @@ mod team_store;
 mod trust;
 
 use std::path::PathBuf;
+
+/// The simulated lab team: `robots` x `stops`, the given odometry noise.
+pub fn sim_lab(
+    seed: u64,
+    robots: usize,
+    stops: usize,
+    odometry: olmap::sim::OdometryNoise,
+) -> olmap::sim::SimDataset {
+    olmap::sim::simulate(
+        &olmap::sim::SimConfig {
+            world: olmap::sim::WorldKind::Lab,
+            seed,
+            robots,
+            stops,
+            odometry,
+            ..Default::default()
+        },
+        |_, _| {},
+    )
+    .unwrap()
+}
 
 /// The shared data folder, or `None` to skip (see `olmap::test_data`).
 pub fn data() -> Option<PathBuf> {

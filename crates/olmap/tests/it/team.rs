@@ -6,22 +6,11 @@ use olmap::align::{
 };
 use olmap::geometry::{PoseError, PoseList};
 use olmap::mapping::evaluate;
-use olmap::sim::{simulate, OdometryNoise, RobotModel, SimConfig, SimDataset, WorldKind};
+use olmap::sim::{OdometryNoise, RobotModel, SimDataset};
 use olmap::team::{map_solo, map_team, scan_name, ScanStore, TeamMap, TeamParams};
 
 fn lab(seed: u64, robots: usize, stops: usize, odometry: OdometryNoise) -> SimDataset {
-    simulate(
-        &SimConfig {
-            world: WorldKind::Lab,
-            seed,
-            robots,
-            stops,
-            odometry,
-            ..Default::default()
-        },
-        |_, _| {},
-    )
-    .unwrap()
+    crate::sim_lab(seed, robots, stops, odometry)
 }
 
 /// The sightings closer than 4 m in a few simulated lab runs (no odometry needed).

@@ -123,7 +123,7 @@ pub(super) fn place_best_first(
 /// [`State::register`] with the scan's footprint at the result: a cache entry.
 fn attempt(state: &State<'_>, s: usize, allow_global: bool) -> Result<Candidate> {
     let Found { registration, via } = state.register(s, allow_global)?;
-    let footprint = footprint(&state.clouds[s], &registration.pose);
+    let footprint = footprint(state.cloud(s), &registration.pose);
     Ok(Candidate {
         registration,
         via,
@@ -276,7 +276,7 @@ impl Batch<'_, '_> {
         self.pending[s].provisional = false;
         let confirmed = self.state.register_near(s, c.registration.pose)?;
         let checked = Candidate {
-            footprint: footprint(&self.state.clouds[s], &confirmed.pose),
+            footprint: footprint(self.state.cloud(s), &confirmed.pose),
             registration: confirmed,
             via: c.via,
         };
@@ -338,7 +338,7 @@ impl Batch<'_, '_> {
         let res = self.state.params.register.search.resolution;
         let pending = &mut self.pending[u];
         if pending.voxels.is_none() {
-            pending.voxels = Some(OccupancyList::from_cloud(&self.state.clouds[u], res)?);
+            pending.voxels = Some(OccupancyList::from_cloud(self.state.cloud(u), res)?);
         }
         let list = pending.voxels.as_ref().expect("just set");
         let entry = pending.cached.as_mut().expect("touched");

@@ -36,7 +36,7 @@ impl State<'_> {
     ) -> Result<Option<Found>> {
         for link in links.iter().take(MAX_LINK_SEARCHES) {
             let other_pose = self.poses[link.other()].expect("filtered");
-            let (region, prior) = link.region(&other_pose, self.team);
+            let (region, prior) = link.region(&other_pose, &self.team);
             let mut params = self.params.register.clone();
             params.search.region = region;
             params.search.prior = prior;
@@ -86,7 +86,7 @@ impl State<'_> {
         {
             return Ok(None);
         }
-        let c = consistency(&self.clouds[s], &self.target, None, prior)?;
+        let c = consistency(self.cloud(s), &self.target, None, prior)?;
         if c.agreement() < trust.min_agreement {
             return Ok(None);
         }

@@ -1,16 +1,20 @@
-//! Map building from many scans: the thesis' batch mapper (best overlap first, §6.4.1)
-//! and a sequential (online) mapper, with optional odometry priors.
+//! Map building from many scans: the thesis' batch mapper (best overlap first, §6.4.1),
+//! a sequential mapper, and an incremental mapper that takes scans one at a time
+//! ([`IncrementalMapper`]), with optional odometry priors and sightings.
 
 mod batch;
 mod fuse;
+mod incremental;
 mod linked;
 mod register;
 mod sequential;
 mod state;
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 pub use fuse::fuse_scan_maps;
+pub use incremental::{IncrementalMapper, ScanOutcome};
 
 use super::links::{Placement, TeamLinks};
 use super::posegraph::{refine_placed, GraphRefineParams, GraphRefinement};
@@ -255,6 +259,21 @@ fn placed_record(
     }
 }
 
+/// The record of the scan that defines the map frame (placed first, at the identity).
+fn frame_record(index: usize, name: &str) -> PlacedScan {
+    PlacedScan {
+        index,
+        name: name.to_string(),
+        pose: Pose::identity(),
+        order: 0,
+        overlap_fraction: 1.0,
+        significance: f64::INFINITY,
+        inlier_fraction: None,
+        global: false,
+        via: Placement::Frame,
+    }
+}
+
 /// The number of search pyramid levels for a map framed by scan `first`: the level rule
 /// [`crate::align::SearchParams::levels_for_source`] applied to twice the frame scan's extent and
 /// its largest range (the parameter's maximum range when the scan has none).
@@ -297,20 +316,14 @@ pub fn build_map_linked(
     let start = Instant::now();
     check_inputs(scans, params, team)?;
     let first = &scans[params.first];
-    let mut state = State::new(scans, params, team)?;
+    let mut state = State::new(
+        Cow::Borrowed(scans),
+        Cow::Borrowed(params),
+        Cow::Borrowed(team),
+    )?;
     state.place(params.first, Pose::identity())?;
     let mut placing = Placing {
-        placed: vec![PlacedScan {
-            index: params.first,
-            name: first.name.clone(),
-            pose: Pose::identity(),
-            order: 0,
-            overlap_fraction: 1.0,
-            significance: f64::INFINITY,
-            inlier_fraction: None,
-            global: false,
-            via: Placement::Frame,
-        }],
+        placed: vec![frame_record(params.first, &first.name)],
         last_doubts: vec![None; scans.len()],
     };
     progress(1, scans.len());

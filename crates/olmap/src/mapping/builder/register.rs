@@ -176,7 +176,7 @@ impl State<'_> {
             None => None,
         };
         register_to_prepared_or_widen(
-            &self.clouds[s],
+            self.cloud(s),
             &self.scans[s].cloud,
             &self.target,
             &self.refine_map,

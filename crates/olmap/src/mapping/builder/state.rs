@@ -11,17 +11,20 @@ use crate::align::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::{Aabb, Pose};
-use crate::mapping::links::TeamLinks;
+use crate::mapping::links::{ScanLink, TeamLinks};
 use crate::occupancy::OccupancyList;
 
 /// The map as the mappers grow it, and each scan's pose once placed.
+///
+/// The batch mappers borrow their scans, parameters and links; the incremental mapper owns
+/// them and grows them a scan at a time ([`State::push_scan`]).
 pub(super) struct State<'a> {
-    pub(super) scans: &'a [ScanInput],
-    /// The clouds registration uses: the scans' points, cut to
-    /// [`MapParams::register_band`] when set.
-    pub(super) clouds: Vec<Cow<'a, PointCloud>>,
-    pub(super) params: &'a MapParams,
-    pub(super) team: &'a TeamLinks,
+    pub(super) scans: Cow<'a, [ScanInput]>,
+    /// The registration clouds cut to [`MapParams::register_band`] when set (`None`: the
+    /// scan's own cloud; see [`State::cloud`]).
+    clouds: Vec<Option<PointCloud>>,
+    pub(super) params: Cow<'a, MapParams>,
+    pub(super) team: Cow<'a, TeamLinks>,
     pub(super) target: SearchTarget,
     pub(super) refine_map: PointCloud,
     /// `refine_map` prepared for ICP, made when a registration first needs it after the
@@ -39,6 +42,11 @@ pub(super) fn footprint(cloud: &PointCloud, pose: &Pose) -> Option<Aabb> {
     cloud.transformed(pose).bounding_box()
 }
 
+/// `cloud` cut to the registration band of `params`, or `None` when there is none.
+fn band_cut(cloud: &PointCloud, params: &MapParams) -> Option<PointCloud> {
+    params.register_band.map(|(lo, hi)| cloud.z_band(lo, hi))
+}
+
 /// Whether two boxes touch or overlap.
 pub(super) fn overlaps(a: &Aabb, b: &Aabb) -> bool {
     (0..3).all(|i| a.min[i] <= b.max[i] && b.min[i] <= a.max[i])
@@ -48,20 +56,15 @@ impl<'a> State<'a> {
     /// An empty map (nothing placed) for `scans`, its search pyramid sized by the frame
     /// scan `params.first` ([`levels_from_extent`]).
     pub(super) fn new(
-        scans: &'a [ScanInput],
-        params: &'a MapParams,
-        team: &'a TeamLinks,
+        scans: Cow<'a, [ScanInput]>,
+        params: Cow<'a, MapParams>,
+        team: Cow<'a, TeamLinks>,
     ) -> Result<State<'a>> {
         let res = params.register.search.resolution;
-        let levels = levels_from_extent(&scans[params.first], params);
-        let clouds = scans
-            .iter()
-            .map(|s| match params.register_band {
-                Some((lo, hi)) => Cow::Owned(s.cloud.z_band(lo, hi)),
-                None => Cow::Borrowed(&s.cloud),
-            })
-            .collect();
+        let levels = levels_from_extent(&scans[params.first], &params);
+        let clouds = scans.iter().map(|s| band_cut(&s.cloud, &params)).collect();
         Ok(State {
+            poses: vec![None; scans.len()],
             scans,
             clouds,
             params,
@@ -69,10 +72,51 @@ impl<'a> State<'a> {
             target: SearchTarget::from_scans(&[], res, levels)?,
             refine_map: PointCloud::new(),
             refine_prepared: OnceLock::new(),
-            poses: vec![None; scans.len()],
             registrations: AtomicUsize::new(0),
             map_box: None,
         })
+    }
+
+    /// The cloud scan `s` registers with: its points cut to [`MapParams::register_band`]
+    /// when set.
+    pub(super) fn cloud(&self, s: usize) -> &PointCloud {
+        self.clouds[s].as_ref().unwrap_or(&self.scans[s].cloud)
+    }
+
+    /// Appends a scan (not placed) in odometry frame `frame` with `links` to scans already
+    /// held; each link's reverse goes to the scan at its other end. Returns its index.
+    /// The links must point at held scans (checked by the caller).
+    pub(super) fn push_scan(
+        &mut self,
+        scan: ScanInput,
+        frame: usize,
+        links: Vec<ScanLink>,
+    ) -> usize {
+        let s = self.scans.len();
+        self.clouds.push(band_cut(&scan.cloud, &self.params));
+        self.scans.to_mut().push(scan);
+        self.poses.push(None);
+        let team = self.team.to_mut();
+        for l in &links {
+            let back = match l {
+                ScanLink::SeenBy { beacon, .. } => ScanLink::Saw {
+                    other: s,
+                    observed: *beacon,
+                },
+                ScanLink::Saw { observed, .. } => ScanLink::SeenBy {
+                    other: s,
+                    beacon: *observed,
+                },
+                ScanLink::Mutual { relative, .. } => ScanLink::Mutual {
+                    other: s,
+                    relative: relative.inverse(),
+                },
+            };
+            team.links[l.other()].push(back);
+        }
+        team.frame.push(frame);
+        team.links.push(links);
+        s
     }
 
     /// The odometry prediction of scan `s` from the placed scan of its frame fewest scans
@@ -168,7 +212,7 @@ impl<'a> State<'a> {
         let (Some((prior, distance)), Some(map)) = (self.predict(s), self.map_box) else {
             return false;
         };
-        let Some(fp) = footprint(&self.clouds[s], &prior) else {
+        let Some(fp) = footprint(self.cloud(s), &prior) else {
             return false;
         };
         let margin = (4.0 * self.params.odometry_window.0).max(self.odometry_tolerance(distance));
@@ -179,10 +223,27 @@ impl<'a> State<'a> {
         !overlaps(&widened, &map)
     }
 
+    /// Empties the map and places the scans `placed` (index, pose) again, in that order:
+    /// after their poses changed.
+    pub(super) fn rebuild(&mut self, placed: &[(usize, Pose)]) -> Result<()> {
+        let res = self.params.register.search.resolution;
+        let levels = self.target.pyramid().levels();
+        self.target = SearchTarget::from_scans(&[], res, levels)?;
+        self.refine_map = PointCloud::new();
+        self.refine_prepared = OnceLock::new();
+        self.map_box = None;
+        self.poses.iter_mut().for_each(|p| *p = None);
+        for &(s, pose) in placed {
+            self.place(s, pose)?;
+        }
+        Ok(())
+    }
+
     /// Adds scan `s` at `pose` to the map: its footprint to the map box, its registration
     /// cloud to the search target, its whole cloud to the refinement points.
     pub(super) fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
-        let cloud = &self.clouds[s];
+        // Field by field (not `self.cloud(s)`): the target is changed below.
+        let cloud = self.clouds[s].as_ref().unwrap_or(&self.scans[s].cloud);
         if let Some(fp) = footprint(cloud, &pose) {
             self.map_box = Some(self.map_box.map_or(fp, |b| b.union(&fp)));
         }
@@ -220,10 +281,10 @@ mod tests {
         let params = MapParams::default();
         let team = TeamLinks::none(scans.len());
         let mut state = State {
-            scans: &scans,
-            clouds: scans.iter().map(|s| Cow::Borrowed(&s.cloud)).collect(),
-            params: &params,
-            team: &team,
+            scans: Cow::Borrowed(&scans),
+            clouds: vec![None; scans.len()],
+            params: Cow::Borrowed(&params),
+            team: Cow::Borrowed(&team),
             target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
             refine_map: PointCloud::new(),
             refine_prepared: OnceLock::new(),

@@ -1,0 +1,360 @@
+//! The incremental mapper: scans are given one at a time (as a robot or a live team
+//! delivers them), each is placed against the map as it is then, scans that cannot be
+//! placed yet wait and are retried when the map has grown, and the pose graph can make the
+//! placed poses consistent at any time.
+
+use std::borrow::Cow;
+
+use super::sequential::try_place;
+use super::state::State;
+use super::{
+    frame_record, fuse, MapBuild, MapParams, PlacedScan, Placing, RejectedScan, ScanInput,
+};
+use crate::error::{Error, Result};
+use crate::geometry::Pose;
+use crate::mapping::links::{ScanLink, TeamLinks};
+use crate::mapping::posegraph::{refine_placed, GraphRefineParams, GraphRefinement};
+use crate::occupancy::OccupancyList;
+
+/// What became of a scan given to [`IncrementalMapper::add_scan`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum ScanOutcome {
+    /// It joined the map.
+    Placed(PlacedScan),
+    /// It is held: nothing placed it yet (the reasons say why). It is retried by
+    /// [`IncrementalMapper::retry_waiting`] once the map has grown or it gained a link.
+    Waiting(RejectedScan),
+}
+
+/// A map built a scan at a time (issue-free online use of the thesis' mapper): each scan
+/// given is registered against the map as it is (along its sightings first, then in
+/// odometry windows that grow, globally only when it has neither), joins the map when the
+/// registration is trusted, and otherwise waits. The first scan given defines the map
+/// frame.
+///
+/// Scans are placed in the order they arrive, so the result depends on that order (not on
+/// the number of threads); [`super::build_map`] in batch mode (best overlap first) is the
+/// offline answer for the same scans.
+///
+/// ```
+/// use olmap::mapping::{IncrementalMapper, MapParams, ScanOutcome};
+/// use olmap::sim::{simulate, SimConfig, WorldKind};
+///
+/// let config = SimConfig { world: WorldKind::Lab, robots: 1, stops: 2, ..Default::default() };
+/// let robot = simulate(&config, |_, _| {}).unwrap().robots.remove(0);
+/// let mut mapper = IncrementalMapper::new(MapParams::default()).unwrap();
+/// for scan in robot.scan_inputs() {
+///     let outcome = mapper.add_scan(scan).unwrap();
+///     assert!(matches!(outcome, ScanOutcome::Placed(_)), "{outcome:?}");
+/// }
+/// // The second scan where the simulator put it, in the first scan's frame.
+/// let truth = robot.truth[0].inverse() * robot.truth[1];
+/// let placed = mapper.pose(1).unwrap();
+/// assert!((placed.translation() - truth.translation()).norm() < 0.1);
+/// ```
+pub struct IncrementalMapper {
+    /// The parameters (`first` unused: the first scan given is the frame).
+    params: MapParams,
+    /// The team's settings (beacon mount, slack, windows, holding unlinked robots).
+    settings: TeamLinks,
+    /// The map and the scans, from the first scan on.
+    state: Option<State<'static>>,
+    placing: Placing,
+    /// How many scans were placed when each scan was last tried (`None`: never, or its
+    /// links changed since).
+    attempted_at: Vec<Option<usize>>,
+    /// The fused map of the first `fused_count` placed scans.
+    fused: Option<OccupancyList>,
+    fused_count: usize,
+}
+
+impl IncrementalMapper {
+    /// A mapper for one robot: every scan in one odometry frame, no sightings.
+    pub fn new(params: MapParams) -> Result<Self> {
+        Self::with_team(params, TeamLinks::none(0))
+    }
+
+    /// A mapper for a team: `settings` gives the beacon mount, locus slack, mutual window
+    /// and whether robots join only through sightings ([`TeamLinks::hold_unlinked`]); its
+    /// `frame` and `links` must be empty (each scan brings its own, see
+    /// [`IncrementalMapper::add_linked_scan`]).
+    pub fn with_team(params: MapParams, settings: TeamLinks) -> Result<Self> {
+        params.validate()?;
+        if !settings.frame.is_empty() || !settings.links.is_empty() {
+            return Err(Error::InvalidArgument(
+                "an incremental mapper starts with no scans: the team settings must have no \
+                 frames or links"
+                    .into(),
+            ));
+        }
+        Ok(IncrementalMapper {
+            params: MapParams { first: 0, ..params },
+            settings,
+            state: None,
+            placing: Placing {
+                placed: Vec::new(),
+                last_doubts: Vec::new(),
+            },
+            attempted_at: Vec::new(),
+            fused: None,
+            fused_count: 0,
+        })
+    }
+
+    /// Adds a scan of the single robot ([`IncrementalMapper::add_linked_scan`] in frame 0
+    /// without links).
+    pub fn add_scan(&mut self, scan: ScanInput) -> Result<ScanOutcome> {
+        self.add_linked_scan(scan, 0, Vec::new())
+    }
+
+    /// Adds a scan taken in odometry frame `frame` (one per robot) with `links`: sightings
+    /// tying it to scans given before (by their index, the order they were given; each
+    /// link's reverse is added to the other scan, which is then retried). Places it when
+    /// its registration is trusted; the first scan given defines the map frame. A scan with
+    /// an odometry prediction or a link is never searched globally (a look-alike place can
+    /// win a global search); one with neither is, unless its robot waits for a sighting.
+    pub fn add_linked_scan(
+        &mut self,
+        scan: ScanInput,
+        frame: usize,
+        links: Vec<ScanLink>,
+    ) -> Result<ScanOutcome> {
+        let n = self.attempted_at.len();
+        if let Some(l) = links.iter().find(|l| l.other() >= n) {
+            return Err(Error::InvalidArgument(format!(
+                "scan {}: a link points at scan {}, but only {n} scans were given before",
+                scan.name,
+                l.other()
+            )));
+        }
+        self.placing.last_doubts.push(None);
+        self.attempted_at.push(None);
+        let Some(state) = self.state.as_mut() else {
+            return self.start(scan, frame, links);
+        };
+        for l in &links {
+            self.attempted_at[l.other()] = None;
+        }
+        let s = state.push_scan(scan, frame, links);
+        self.attempt(s)?;
+        Ok(self.outcome(s))
+    }
+
+    /// The first scan: it defines the map frame and sizes the search pyramid.
+    fn start(
+        &mut self,
+        scan: ScanInput,
+        frame: usize,
+        links: Vec<ScanLink>,
+    ) -> Result<ScanOutcome> {
+        let mut team = self.settings.clone();
+        team.frame.push(frame);
+        team.links.push(links);
+        let mut state = State::new(
+            Cow::Owned(vec![scan]),
+            Cow::Owned(self.params.clone()),
+            Cow::Owned(team),
+        )?;
+        state.place(0, Pose::identity())?;
+        self.placing
+            .placed
+            .push(frame_record(0, &state.scans[0].name));
+        self.attempted_at[0] = Some(0);
+        self.state = Some(state);
+        Ok(self.outcome(0))
+    }
+
+    /// One attempt to place unplaced scan `s`, remembered in [`Self::attempted_at`].
+    fn attempt(&mut self, s: usize) -> Result<bool> {
+        let state = self.state.as_mut().expect("started");
+        self.attempted_at[s] = Some(self.placing.placed.len());
+        if state.unlinked(s) {
+            self.placing.last_doubts[s] = Some(vec![format!(
+                "no sighting ties {}'s robot to the map yet",
+                state.scans[s].name
+            )]);
+            return Ok(false);
+        }
+        if state.far_from_map(s) {
+            self.placing.last_doubts[s] =
+                Some(vec!["odometry puts it outside the map so far".to_string()]);
+            return Ok(false);
+        }
+        let global = state.predict(s).is_none() && state.placed_links(s).is_empty();
+        let placed = try_place(state, &mut self.placing, s, global)?;
+        if placed {
+            self.attempted_at[s] = Some(self.placing.placed.len());
+        }
+        Ok(placed)
+    }
+
+    /// The outcome of scan `s` as it stands.
+    fn outcome(&self, s: usize) -> ScanOutcome {
+        match self.placing.placed.iter().rev().find(|p| p.index == s) {
+            Some(p) => ScanOutcome::Placed(p.clone()),
+            None => ScanOutcome::Waiting(self.rejected(s)),
+        }
+    }
+
+    fn rejected(&self, s: usize) -> RejectedScan {
+        let state = self.state.as_ref().expect("started");
+        RejectedScan {
+            index: s,
+            name: state.scans[s].name.clone(),
+            reasons: self.placing.last_doubts[s]
+                .clone()
+                .filter(|d| !d.is_empty())
+                .unwrap_or_else(|| vec!["no trusted alignment to the map".into()]),
+        }
+    }
+
+    /// Retries up to `max` waiting scans that may place now (the map grew since they were
+    /// tried, or they gained a link), those nearest the map first; returns the ones placed.
+    /// Call it when no new scan is queued: each retry costs one registration.
+    pub fn retry_waiting(&mut self, max: usize) -> Result<Vec<PlacedScan>> {
+        let Some(state) = self.state.as_ref() else {
+            return Ok(Vec::new());
+        };
+        let mut due: Vec<(usize, (bool, f64))> = (0..state.scans.len())
+            .filter(|&s| self.due(state, s))
+            .map(|s| (s, state.nearness(s)))
+            .collect();
+        due.sort_by(|a, b| {
+            a.1.partial_cmp(&b.1)
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(a.0.cmp(&b.0))
+        });
+        let mut placed = Vec::new();
+        for (s, _) in due.into_iter().take(max) {
+            if self.attempt(s)? {
+                placed.push(self.placing.placed.last().expect("just placed").clone());
+            }
+        }
+        Ok(placed)
+    }
+
+    /// Whether some waiting scan would be retried by [`IncrementalMapper::retry_waiting`].
+    pub fn has_due(&self) -> bool {
+        let Some(state) = self.state.as_ref() else {
+            return false;
+        };
+        (0..state.scans.len()).any(|s| self.due(state, s))
+    }
+
+    /// Whether waiting scan `s` is worth another attempt: it gained a link since its last
+    /// one, or the map grew since and odometry predicts it from a placed scan (a cheap
+    /// window search), or the map at least doubled since (a scan with neither a
+    /// prediction nor a new link is searched along its links or globally: costly, so
+    /// retried a logarithmic number of times).
+    fn due(&self, state: &State<'static>, s: usize) -> bool {
+        if state.poses[s].is_some() {
+            return false;
+        }
+        let now = self.placing.placed.len();
+        match self.attempted_at[s] {
+            None => true,
+            Some(a) if state.predicts_from(s).is_some() => a < now,
+            Some(a) => now >= 2 * a.max(1),
+        }
+    }
+
+    /// The scans given so far, in the order given (their indices).
+    pub fn scans(&self) -> &[ScanInput] {
+        self.state.as_ref().map_or(&[], |s| &s.scans)
+    }
+
+    /// `T_map_scan` of scan `s` once placed.
+    pub fn pose(&self, s: usize) -> Option<Pose> {
+        self.state.as_ref()?.poses.get(s).copied().flatten()
+    }
+
+    /// The placed scans in joining order (poses as placed, or as the last
+    /// [`IncrementalMapper::optimise`] left them).
+    pub fn placements(&self) -> &[PlacedScan] {
+        &self.placing.placed
+    }
+
+    /// The scans waiting, with why.
+    pub fn waiting(&self) -> Vec<RejectedScan> {
+        let Some(state) = self.state.as_ref() else {
+            return Vec::new();
+        };
+        (0..state.scans.len())
+            .filter(|&s| state.poses[s].is_none())
+            .map(|s| self.rejected(s))
+            .collect()
+    }
+
+    /// Registrations run so far.
+    pub fn registrations(&self) -> usize {
+        self.state.as_ref().map_or(0, |s| {
+            s.registrations.load(std::sync::atomic::Ordering::Relaxed)
+        })
+    }
+
+    /// The fused map of the placed scans (ray traced at their poses with the sensor model;
+    /// scans placed since the last call are fused now). No position buckets or count
+    /// cleaning: [`IncrementalMapper::into_build`] applies those.
+    pub fn map(&mut self) -> Result<&OccupancyList> {
+        let res = self.params.register.search.resolution;
+        let mut map = match self.fused.take() {
+            Some(m) => m,
+            None => OccupancyList::new(res)?,
+        };
+        if let Some(state) = self.state.as_ref() {
+            for p in &self.placing.placed[self.fused_count..] {
+                map.insert_scan(&state.scans[p.index].cloud, &p.pose, &self.params.sensor)?;
+            }
+        }
+        self.fused_count = self.placing.placed.len();
+        Ok(self.fused.insert(map))
+    }
+
+    /// Makes the placed poses consistent with a pose graph of pairwise registrations,
+    /// odometry and mutual sightings ([`refine_placed`]), then rebuilds the map (search
+    /// target, refinement points, fused map) at the refined poses: later scans are placed
+    /// against the corrected map.
+    pub fn optimise(&mut self, graph: &GraphRefineParams) -> Result<GraphRefinement> {
+        let Some(state) = self.state.as_mut() else {
+            return Err(Error::EmptyInput {
+                what: "the incremental map (no scan given yet)".into(),
+            });
+        };
+        let refined = refine_placed(&state.scans, &state.team, &self.placing.placed, graph)?;
+        for (p, pose) in self.placing.placed.iter_mut().zip(&refined.poses) {
+            p.pose = *pose;
+        }
+        let placed: Vec<(usize, Pose)> = self
+            .placing
+            .placed
+            .iter()
+            .map(|p| (p.index, p.pose))
+            .collect();
+        state.rebuild(&placed)?;
+        self.fused = None;
+        self.fused_count = 0;
+        Ok(refined)
+    }
+
+    /// The map as [`super::build_map`] returns it: the placed scans fused by ray tracing in
+    /// joining order (buckets, cleaning and scan maps as the parameters say), the waiting
+    /// scans as rejected.
+    pub fn into_build(self) -> Result<MapBuild> {
+        let Some(state) = self.state.as_ref() else {
+            return Err(Error::EmptyInput {
+                what: "the incremental map (no scan given yet)".into(),
+            });
+        };
+        let fused = fuse::fuse_placed(&state.scans, &self.placing.placed, &self.params)?;
+        Ok(MapBuild {
+            map: fused.map,
+            rejected: self.waiting(),
+            placed: self.placing.placed.clone(),
+            scan_maps: fused.scan_maps,
+            registrations: self.registrations(),
+            seconds: 0.0,
+            entropy_after_scan: fused.entropy_after_scan,
+            graph: None,
+        })
+    }
+}
