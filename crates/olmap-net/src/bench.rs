@@ -161,7 +161,7 @@ pub fn run_net_bench(
             out: dir.join("out"),
             params: TeamParams::default(),
             truth: None,
-            settle: Duration::from_millis(50),
+            settle: Duration::ZERO,
         })?;
         let mut robots = Vec::new();
         for r in raw.robots() {

@@ -1,24 +1,26 @@
-//! The mapper role: merge every record of the team into a durable store, re-map the team
-//! as records arrive, publish figures, serve the map and poses, and write the outputs on
-//! request and on exit.
+//! The mapper role: merge every record of the team into a durable store, place each new
+//! record in a live map as it arrives, publish figures, serve the live map and poses, and
+//! write the outputs on request and on exit.
 //!
-//! Placement is the batch team mapper of `olmap team` re-run on the merged store whenever
-//! new records have arrived (and the previous run has finished): so the final map and
-//! poses are exactly those `olmap team` computes from the same records. An incremental 3D
-//! mapper would cut the publish→placement latency from one whole team mapping to one scan's
-//! placement; until olmap has one, this is the honest choice.
+//! Live placement is incremental ([`olmap::team::LiveTeam`]): each record is linked to the
+//! records held (sightings at the same moment) and placed against the map as it is, in the
+//! order records arrive; scans that cannot be placed yet wait and are retried when the
+//! mapper has nothing new to place. The publish→placement latency is one scan's placement,
+//! not a whole team mapping. The written outputs ([`Mapper::write_outputs`], on exit) are
+//! the batch team mapper of `olmap team` run on the merged store, so the final map and
+//! poses are exactly those `olmap team` computes from the same records, whatever order the
+//! records arrived in.
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use olmap::geometry::PoseList;
-use olmap::team::{
-    map_team, run_team_pipeline, ScanStore, TeamJob, TeamMap, TeamParams, TeamReport,
-};
+use olmap::mapping::ScanOutcome;
+use olmap::team::{run_team_pipeline, LiveTeam, ScanStore, TeamJob, TeamParams, TeamReport};
 use serde::Serialize;
 use zenoh::Wait;
 
@@ -34,12 +36,12 @@ pub struct MapperOptions {
     /// Output folder: `team.olm` (and `.bt`, `.ply`), `team_poses.txt`, `team.store`,
     /// `report.json` (the team report), `net.json` (the node's status and counters).
     pub out: PathBuf,
-    /// The team mapper's parameters.
+    /// The team mapper's parameters (the live map and the written outputs).
     pub params: TeamParams,
     /// Ground truth to evaluate against, named as the team map names scans.
     pub truth: Option<PoseList>,
-    /// Wait this long after a record arrives before mapping, so that a burst is mapped
-    /// once (default 0.2 s).
+    /// Wait this long after a record arrives before placing it in the live map (default
+    /// 0: every record is placed as soon as the mapping thread is free).
     pub settle: Duration,
 }
 
@@ -59,15 +61,15 @@ pub struct MapperOutputs {
     pub report: Option<TeamReport>,
 }
 
-/// The latest completed mapping run.
+/// The live map and what it has placed.
 #[derive(Default)]
 struct Latest {
-    map: Option<Arc<TeamMap>>,
+    /// The live team map (`None` before the first record).
+    live: Option<LiveTeam>,
     /// Scans placed so far (by `(robot, seq)`), for latency: first placement only.
     placed_once: HashSet<(u32, u32)>,
     latencies_ms: Vec<f64>,
 }
-
 /// A running mapper: a [`Node`], a mapping thread and a serving thread.
 pub struct Mapper {
     node: Node,
@@ -114,19 +116,20 @@ impl Mapper {
                     let mut idle = true;
                     if let Ok(Some(query)) = map_q.try_recv() {
                         idle = false;
-                        let bytes = lock(&latest).map.as_ref().map(|m| {
+                        let bytes = lock(&latest).live.as_mut().and_then(|live| {
                             let mut v = Vec::new();
-                            m.build.map.write_olm(&mut v).map(|_| v)
+                            live.map().ok()?.write_olm(&mut v).ok()?;
+                            Some(v)
                         });
-                        if let Some(Ok(bytes)) = bytes {
+                        if let Some(bytes) = bytes {
                             let _ = query.reply(query.key_expr().clone(), bytes).wait();
                         }
                     }
                     if let Ok(Some(query)) = poses_q.try_recv() {
                         idle = false;
-                        let text = lock(&latest).map.as_ref().map(|m| {
+                        let text = lock(&latest).live.as_ref().map(|live| {
                             let mut v = Vec::new();
-                            m.poses().write(&mut v).map(|_| v)
+                            live.poses().write(&mut v).map(|_| v)
                         });
                         if let Some(Ok(text)) = text {
                             let _ = query.reply(query.key_expr().clone(), text).wait();
@@ -160,9 +163,13 @@ impl Mapper {
         &self.node
     }
 
-    /// The latest joint map, if a mapping run has completed.
-    pub fn latest(&self) -> Option<Arc<TeamMap>> {
-        lock(&self.latest).map.clone()
+    /// The live map's poses, named `ROBOT/scanNNN`, in joining order (empty before the
+    /// first record).
+    pub fn live_poses(&self) -> PoseList {
+        lock(&self.latest)
+            .live
+            .as_ref()
+            .map_or_else(PoseList::default, LiveTeam::poses)
     }
 
     /// Maps the store as it is now with the team pipeline and writes every output into the
@@ -225,57 +232,149 @@ fn write_outputs(
     })
 }
 
+/// Most waiting scans retried per idle round of the mapping thread.
+const RETRIES_PER_ROUND: usize = 1;
+
 fn mapping_loop(
     shared: &Shared,
     opts: &MapperOptions,
     latest: &Mutex<Latest>,
     finishing: &AtomicBool,
 ) {
-    let mut mapped_generation = 0u64;
-    while !shared.stop.load(Ordering::Relaxed) && !finishing.load(Ordering::Relaxed) {
-        let generation = {
-            let g = lock(&shared.generation);
-            let g = shared
-                .changed
-                .wait_timeout(g, Duration::from_millis(200))
-                .unwrap_or_else(|p| p.into_inner())
-                .0;
-            *g
+    let live = match LiveTeam::new(opts.params.clone()) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("{}: cannot start the live map: {e}", shared.opts.name);
+            return;
+        }
+    };
+    lock(latest).live = Some(live);
+    let mut seen_generation = 0u64;
+    let mut reported_error = false;
+    let running = || !shared.stop.load(Ordering::Relaxed) && !finishing.load(Ordering::Relaxed);
+    while running() {
+        let generation = *lock(&shared.generation);
+        let new = if generation != seen_generation {
+            if !opts.settle.is_zero() {
+                std::thread::sleep(opts.settle);
+            }
+            seen_generation = *lock(&shared.generation);
+            unplaced_records(shared, latest)
+        } else {
+            Vec::new()
         };
-        if generation == mapped_generation || shared.stop.load(Ordering::Relaxed) {
+        if new.is_empty() {
+            // Nothing new: retry a waiting scan, or wait for a record.
+            let retried = {
+                let mut l = lock(latest);
+                let live = l.live.as_mut().expect("set above");
+                if live.has_due() {
+                    Some(live.retry_waiting(RETRIES_PER_ROUND))
+                } else {
+                    None
+                }
+            };
+            match retried {
+                Some(Ok(placed)) => {
+                    if !placed.is_empty() {
+                        note_placed(shared, latest, &placed);
+                    }
+                }
+                Some(Err(e)) => report_once(shared, &mut reported_error, &e),
+                None => {
+                    update_voxels(shared, latest);
+                    let g = lock(&shared.generation);
+                    if *g == seen_generation {
+                        let _ = shared
+                            .changed
+                            .wait_timeout(g, Duration::from_millis(200))
+                            .unwrap_or_else(|p| p.into_inner());
+                    }
+                }
+            }
             continue;
         }
-        std::thread::sleep(opts.settle);
-        if finishing.load(Ordering::Relaxed) {
-            break;
-        }
-        mapped_generation = *lock(&shared.generation);
-        let store = lock(&shared.store).store().clone();
-        let started = Instant::now();
-        match map_team(&store, &opts.params, |_, _| {}) {
-            Ok(team) => publish_run(shared, latest, team, store.len() as u64),
-            Err(e) => eprintln!(
-                "{}: mapping {} records failed after {:.1} s: {e}",
-                shared.opts.name,
-                store.len(),
-                started.elapsed().as_secs_f64()
-            ),
+        for (name, scan) in new {
+            if !running() {
+                break;
+            }
+            let outcome = {
+                let mut l = lock(latest);
+                l.live.as_mut().expect("set above").add(&scan, &name)
+            };
+            match outcome {
+                Ok(ScanOutcome::Placed(_)) => {
+                    note_placed(shared, latest, &[(scan.robot, scan.seq)])
+                }
+                Ok(ScanOutcome::Waiting(_)) => note_placed(shared, latest, &[]),
+                Err(e) => report_once(shared, &mut reported_error, &e),
+            }
         }
     }
 }
 
-/// Records a completed run: latencies of scans placed for the first time, figures.
-fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap, mapped_records: u64) {
+/// Fuses the scans placed since the last call into the live map and publishes its size
+/// (done when idle: ray tracing is not on the latency path).
+fn update_voxels(shared: &Shared, latest: &Mutex<Latest>) {
+    let voxels = {
+        let mut l = lock(latest);
+        match l.live.as_mut().map(|live| live.map().map(|m| m.len())) {
+            Some(Ok(n)) => n as u64,
+            _ => return,
+        }
+    };
+    let mut figures = lock(&shared.figures);
+    figures.get_or_insert_with(MapFigures::default).voxels = voxels;
+}
+
+/// Logs the first live-mapping error (later ones are counted in no figure: the written
+/// outputs, mapped in batch, are what counts).
+fn report_once(shared: &Shared, reported: &mut bool, e: &olmap::Error) {
+    if !*reported {
+        eprintln!(
+            "{}: live mapping: {e} (later errors not shown)",
+            shared.opts.name
+        );
+        *reported = true;
+    }
+}
+
+/// The records held and not yet given to the live map, oldest first (by time stamp, then
+/// robot and seq), with their robots' names.
+fn unplaced_records(
+    shared: &Shared,
+    latest: &Mutex<Latest>,
+) -> Vec<(String, olmap::team::StoredScan)> {
+    let fed: HashSet<(u32, u32)> = {
+        let l = lock(latest);
+        let live = l.live.as_ref().expect("set");
+        (0..live.len()).map(|i| live.key(i)).collect()
+    };
+    let store = lock(&shared.store);
+    let store = store.store();
+    let mut new: Vec<(String, olmap::team::StoredScan)> = store
+        .iter()
+        .filter(|s| !fed.contains(&(s.robot, s.seq)))
+        .map(|s| (store.robot_name(s.robot), s.clone()))
+        .collect();
+    new.sort_by(|a, b| {
+        a.1.time
+            .total_cmp(&b.1.time)
+            .then((a.1.robot, a.1.seq).cmp(&(b.1.robot, b.1.seq)))
+    });
+    new
+}
+
+/// Records the scans `placed` now (latency of those placed for the first time) and
+/// refreshes the figures.
+fn note_placed(shared: &Shared, latest: &Mutex<Latest>, placed: &[(u32, u32)]) {
     let now = now_ns();
-    let mut placed: BTreeMap<u32, u64> = BTreeMap::new();
     let mut latest = lock(latest);
     {
         let sent = lock(&shared.sent_ns);
-        for p in &team.build.placed {
-            let key = team.keys[p.index];
-            *placed.entry(key.0).or_default() += 1;
-            if latest.placed_once.insert(key) {
-                if let Some(&t) = sent.get(&key) {
+        for key in placed {
+            if latest.placed_once.insert(*key) {
+                if let Some(&t) = sent.get(key) {
                     latest.latencies_ms.push(now.saturating_sub(t) as f64 / 1e6);
                 }
             }
@@ -290,12 +389,16 @@ fn publish_run(shared: &Shared, latest: &Mutex<Latest>, team: TeamMap, mapped_re
         (Some(a), Some(b), Some(c)) => Some([a, b, c]),
         _ => None,
     };
+    let live = latest.live.as_ref().expect("set");
+    let mut per_robot: BTreeMap<u32, u64> = BTreeMap::new();
+    for p in live.placements() {
+        *per_robot.entry(live.key(p.index).0).or_default() += 1;
+    }
+    let mapped = live.len() as u64;
     let mut figures = lock(&shared.figures);
     let f = figures.get_or_insert_with(MapFigures::default);
-    f.placed = placed;
-    f.voxels = team.build.map.len() as u64;
+    f.placed = per_robot;
     f.runs += 1;
-    f.mapped_records = mapped_records;
+    f.mapped_records = mapped;
     f.latency_ms = latency_ms;
-    latest.map = Some(Arc::new(team));
 }

@@ -89,16 +89,25 @@ fn the_network_mapper_maps_what_olmap_team_maps_from_the_same_records() {
         store_bytes(&mapper.node().store_snapshot()),
         store_bytes(&records)
     );
-    // The live map catches up: a run over every record completes and reports figures.
+    // The live map catches up: every record placed incrementally, with latency figures,
+    // each live pose within a map voxel (0.1 m) of the truth.
     let deadline = Instant::now() + Duration::from_secs(600);
-    while mapper.node().status().placed == 0 && Instant::now() < deadline {
+    while mapper.node().status().placed < records.len() as u64 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(200));
     }
     let status = mapper.node().status();
-    assert!(status.placed > 0 && status.map_runs > 0, "{status:?}");
+    assert_eq!(status.placed, records.len() as u64, "{status:?}");
+    assert_eq!(status.mapped_records, records.len() as u64, "{status:?}");
     assert!(
         status.latency_ms.is_some(),
         "no latency figures: {status:?}"
+    );
+    let live = olmap::mapping::evaluate(&mapper.live_poses(), &truth).unwrap();
+    assert_eq!(live.summary.scans, records.len());
+    assert!(
+        live.summary.translation_m[2] <= RESOLUTION,
+        "{:?}",
+        live.summary
     );
 
     let written = mapper.write_outputs().unwrap();

@@ -323,7 +323,7 @@ pub fn run_robot_cmd(args: &RobotArgs) -> anyhow::Result<ExitCode> {
             out: args.out.clone().expect("checked"),
             params: TeamParams::default(),
             truth: None,
-            settle: Duration::from_millis(200),
+            settle: Duration::ZERO,
         })?;
         let summary = replay_on(mapper.node(), &opts, robot, &scans, stop, &mut on_stop)?;
         serving(&summary);
@@ -370,7 +370,7 @@ pub fn run_mapper_cmd(args: &MapperArgs) -> anyhow::Result<ExitCode> {
         out: args.out.clone(),
         params: TeamParams::default(),
         truth,
-        settle: Duration::from_millis(200),
+        settle: Duration::ZERO,
     })?;
     if !args.json {
         eprintln!(
