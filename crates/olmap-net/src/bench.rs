@@ -76,7 +76,7 @@ pub struct NetBenchReport {
     pub published: u64,
     /// Publish→placement latency, ms: p50, p95, max.
     pub latency_ms: Option<[f64; 3]>,
-    /// Mapping runs the mapper completed.
+    /// Live map updates (records given, waiting scans placed).
     pub map_runs: u64,
     /// Seconds from the first publish until every scan was placed (or the timeout).
     pub wall_s: f64,

@@ -244,9 +244,9 @@ pub fn run_live_demo(
             cfg.timeout
         )));
     }
-    // Latency figures need a live mapping run over every record (a scan the team mapper
-    // cannot place stays unplaced: wait for the run, not for placements).
-    progress("waiting for a live mapping run over every record");
+    // Latency figures need every record given to the live map (a scan it cannot place
+    // waits: wait for the records, not for placements).
+    progress("waiting for the live map to take every record");
     run_watch(
         &WatchOptions {
             net: NetOptions::loopback(&team, None, &[port]),

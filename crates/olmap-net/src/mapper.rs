@@ -61,11 +61,15 @@ pub struct MapperOutputs {
     pub report: Option<TeamReport>,
 }
 
-/// The live map and what it has placed.
+/// What the serving side sees of the live map: snapshots the mapping thread publishes
+/// (the live map itself stays on the mapping thread, so a query never waits for a
+/// placement).
 #[derive(Default)]
 struct Latest {
-    /// The live team map (`None` before the first record).
-    live: Option<LiveTeam>,
+    /// The placed scans' poses after the last change.
+    poses: PoseList,
+    /// The live map as `.olm` bytes, made when the mapping thread was last idle.
+    map_olm: Option<Arc<Vec<u8>>>,
     /// Scans placed so far (by `(robot, seq)`), for latency: first placement only.
     placed_once: HashSet<(u32, u32)>,
     latencies_ms: Vec<f64>,
@@ -77,7 +81,7 @@ pub struct Mapper {
     latest: Arc<Mutex<Latest>>,
     threads: Vec<JoinHandle<()>>,
     write_lock: Arc<Mutex<()>>,
-    /// Set when the mapper is finishing: no new mapping run starts.
+    /// Set when the mapper is finishing: the live map takes no more records.
     finishing: Arc<AtomicBool>,
 }
 
@@ -116,21 +120,20 @@ impl Mapper {
                     let mut idle = true;
                     if let Ok(Some(query)) = map_q.try_recv() {
                         idle = false;
-                        let bytes = lock(&latest).live.as_mut().and_then(|live| {
-                            let mut v = Vec::new();
-                            live.map().ok()?.write_olm(&mut v).ok()?;
-                            Some(v)
-                        });
+                        let bytes = lock(&latest).map_olm.clone();
                         if let Some(bytes) = bytes {
-                            let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                            let _ = query
+                                .reply(query.key_expr().clone(), bytes.as_slice())
+                                .wait();
                         }
                     }
                     if let Ok(Some(query)) = poses_q.try_recv() {
                         idle = false;
-                        let text = lock(&latest).live.as_ref().map(|live| {
+                        let text = {
+                            let l = lock(&latest);
                             let mut v = Vec::new();
-                            live.poses().write(&mut v).map(|_| v)
-                        });
+                            (!l.poses.is_empty()).then(|| l.poses.write(&mut v).map(|_| v))
+                        };
                         if let Some(Ok(text)) = text {
                             let _ = query.reply(query.key_expr().clone(), text).wait();
                         }
@@ -166,10 +169,7 @@ impl Mapper {
     /// The live map's poses, named `ROBOT/scanNNN`, in joining order (empty before the
     /// first record).
     pub fn live_poses(&self) -> PoseList {
-        lock(&self.latest)
-            .live
-            .as_ref()
-            .map_or_else(PoseList::default, LiveTeam::poses)
+        lock(&self.latest).poses.clone()
     }
 
     /// Maps the store as it is now with the team pipeline and writes every output into the
@@ -178,8 +178,8 @@ impl Mapper {
         write_outputs(&self.node.shared, &self.opts, &self.write_lock)
     }
 
-    /// Writes the outputs one last time (no new live mapping run starts meanwhile; one in
-    /// progress finishes), then closes: what a mapper does on SIGINT/SIGTERM.
+    /// Writes the outputs one last time (the live map takes no more records meanwhile; a
+    /// placement in progress finishes), then closes: what a mapper does on SIGINT/SIGTERM.
     pub fn finish(self) -> Result<MapperOutputs> {
         self.finishing.store(true, Ordering::Relaxed);
         let out = self.write_outputs();
@@ -187,7 +187,7 @@ impl Mapper {
         out
     }
 
-    /// Stops the threads (a mapping run in progress finishes first) and closes the node.
+    /// Stops the threads (a placement in progress finishes first) and closes the node.
     pub fn close(mut self) {
         self.node.shared.stop.store(true, Ordering::Relaxed);
         self.node.shared.changed.notify_all();
@@ -241,16 +241,16 @@ fn mapping_loop(
     latest: &Mutex<Latest>,
     finishing: &AtomicBool,
 ) {
-    let live = match LiveTeam::new(opts.params.clone()) {
+    let mut live = match LiveTeam::new(opts.params.clone()) {
         Ok(l) => l,
         Err(e) => {
             eprintln!("{}: cannot start the live map: {e}", shared.opts.name);
             return;
         }
     };
-    lock(latest).live = Some(live);
     let mut seen_generation = 0u64;
     let mut reported_error = false;
+    let mut map_snapshot_at = usize::MAX;
     let running = || !shared.stop.load(Ordering::Relaxed) && !finishing.load(Ordering::Relaxed);
     while running() {
         let generation = *lock(&shared.generation);
@@ -259,37 +259,31 @@ fn mapping_loop(
                 std::thread::sleep(opts.settle);
             }
             seen_generation = *lock(&shared.generation);
-            unplaced_records(shared, latest)
+            unplaced_records(shared, &live)
         } else {
             Vec::new()
         };
         if new.is_empty() {
-            // Nothing new: retry a waiting scan, or wait for a record.
-            let retried = {
-                let mut l = lock(latest);
-                let live = l.live.as_mut().expect("set above");
-                if live.has_due() {
-                    Some(live.retry_waiting(RETRIES_PER_ROUND))
-                } else {
-                    None
-                }
-            };
-            match retried {
-                Some(Ok(placed)) => {
-                    if !placed.is_empty() {
-                        note_placed(shared, latest, &placed);
+            // Nothing new: retry a waiting scan; else refresh the map snapshot; else wait.
+            if live.has_due() {
+                match live.retry_waiting(RETRIES_PER_ROUND) {
+                    Ok(placed) => {
+                        if !placed.is_empty() {
+                            publish(shared, latest, &live, &placed);
+                        }
                     }
+                    Err(e) => report_once(shared, &mut reported_error, &e),
                 }
-                Some(Err(e)) => report_once(shared, &mut reported_error, &e),
-                None => {
-                    update_voxels(shared, latest);
-                    let g = lock(&shared.generation);
-                    if *g == seen_generation {
-                        let _ = shared
-                            .changed
-                            .wait_timeout(g, Duration::from_millis(200))
-                            .unwrap_or_else(|p| p.into_inner());
-                    }
+            } else if map_snapshot_at != live.placements().len() {
+                map_snapshot_at = live.placements().len();
+                snapshot_map(shared, latest, &mut live);
+            } else {
+                let g = lock(&shared.generation);
+                if *g == seen_generation {
+                    let _ = shared
+                        .changed
+                        .wait_timeout(g, Duration::from_millis(200))
+                        .unwrap_or_else(|p| p.into_inner());
                 }
             }
             continue;
@@ -298,37 +292,35 @@ fn mapping_loop(
             if !running() {
                 break;
             }
-            let outcome = {
-                let mut l = lock(latest);
-                l.live.as_mut().expect("set above").add(&scan, &name)
-            };
-            match outcome {
+            match live.add(&scan, &name) {
                 Ok(ScanOutcome::Placed(_)) => {
-                    note_placed(shared, latest, &[(scan.robot, scan.seq)])
+                    publish(shared, latest, &live, &[(scan.robot, scan.seq)])
                 }
-                Ok(ScanOutcome::Waiting(_)) => note_placed(shared, latest, &[]),
+                Ok(ScanOutcome::Waiting(_)) => publish(shared, latest, &live, &[]),
                 Err(e) => report_once(shared, &mut reported_error, &e),
             }
         }
     }
 }
 
-/// Fuses the scans placed since the last call into the live map and publishes its size
-/// (done when idle: ray tracing is not on the latency path).
-fn update_voxels(shared: &Shared, latest: &Mutex<Latest>) {
-    let voxels = {
-        let mut l = lock(latest);
-        match l.live.as_mut().map(|live| live.map().map(|m| m.len())) {
-            Some(Ok(n)) => n as u64,
-            _ => return,
-        }
+/// Fuses the scans placed since the last snapshot into the live map and publishes it as
+/// `.olm` bytes and its size (done when idle: ray tracing is not on the latency path).
+fn snapshot_map(shared: &Shared, latest: &Mutex<Latest>, live: &mut LiveTeam) {
+    let Ok(map) = live.map() else {
+        return;
     };
+    let voxels = map.len() as u64;
+    let mut bytes = Vec::new();
+    if map.write_olm(&mut bytes).is_err() {
+        return;
+    }
+    lock(latest).map_olm = Some(Arc::new(bytes));
     let mut figures = lock(&shared.figures);
     figures.get_or_insert_with(MapFigures::default).voxels = voxels;
 }
 
-/// Logs the first live-mapping error (later ones are counted in no figure: the written
-/// outputs, mapped in batch, are what counts).
+/// Logs the first live-mapping error (the written outputs, mapped in batch, are what
+/// counts; the live map skips what it could not take).
 fn report_once(shared: &Shared, reported: &mut bool, e: &olmap::Error) {
     if !*reported {
         eprintln!(
@@ -339,22 +331,14 @@ fn report_once(shared: &Shared, reported: &mut bool, e: &olmap::Error) {
     }
 }
 
-/// The records held and not yet given to the live map, oldest first (by time stamp, then
-/// robot and seq), with their robots' names.
-fn unplaced_records(
-    shared: &Shared,
-    latest: &Mutex<Latest>,
-) -> Vec<(String, olmap::team::StoredScan)> {
-    let fed: HashSet<(u32, u32)> = {
-        let l = lock(latest);
-        let live = l.live.as_ref().expect("set");
-        (0..live.len()).map(|i| live.key(i)).collect()
-    };
+/// The records held and not yet in the live map, oldest first (by time stamp, then robot
+/// and seq), with their robots' names.
+fn unplaced_records(shared: &Shared, live: &LiveTeam) -> Vec<(String, olmap::team::StoredScan)> {
     let store = lock(&shared.store);
     let store = store.store();
     let mut new: Vec<(String, olmap::team::StoredScan)> = store
         .iter()
-        .filter(|s| !fed.contains(&(s.robot, s.seq)))
+        .filter(|s| live.index_of(s.robot, s.seq).is_none())
         .map(|s| (store.robot_name(s.robot), s.clone()))
         .collect();
     new.sort_by(|a, b| {
@@ -365,9 +349,9 @@ fn unplaced_records(
     new
 }
 
-/// Records the scans `placed` now (latency of those placed for the first time) and
-/// refreshes the figures.
-fn note_placed(shared: &Shared, latest: &Mutex<Latest>, placed: &[(u32, u32)]) {
+/// Publishes the live map's state after a change: the scans `placed` now (latency of those
+/// placed for the first time), the poses, the figures.
+fn publish(shared: &Shared, latest: &Mutex<Latest>, live: &LiveTeam, placed: &[(u32, u32)]) {
     let now = now_ns();
     let mut latest = lock(latest);
     {
@@ -380,6 +364,7 @@ fn note_placed(shared: &Shared, latest: &Mutex<Latest>, placed: &[(u32, u32)]) {
             }
         }
     }
+    latest.poses = live.poses();
     let mut l = latest.latencies_ms.clone();
     let latency_ms = match (
         quantile(&mut l, 0.5),
@@ -389,16 +374,14 @@ fn note_placed(shared: &Shared, latest: &Mutex<Latest>, placed: &[(u32, u32)]) {
         (Some(a), Some(b), Some(c)) => Some([a, b, c]),
         _ => None,
     };
-    let live = latest.live.as_ref().expect("set");
     let mut per_robot: BTreeMap<u32, u64> = BTreeMap::new();
     for p in live.placements() {
         *per_robot.entry(live.key(p.index).0).or_default() += 1;
     }
-    let mapped = live.len() as u64;
     let mut figures = lock(&shared.figures);
     let f = figures.get_or_insert_with(MapFigures::default);
     f.placed = per_robot;
     f.runs += 1;
-    f.mapped_records = mapped;
+    f.mapped_records = live.len() as u64;
     f.latency_ms = latency_ms;
 }

@@ -65,10 +65,10 @@ pub struct NodeStatus {
     pub placed: u64,
     /// Occupied voxels of the map (mappers).
     pub map_voxels: u64,
-    /// Completed mapping runs (mappers).
+    /// Live map updates: records given to it and waiting scans placed (mappers).
     pub map_runs: u64,
-    /// Records the last completed mapping run covered (mappers): once it equals `records`,
-    /// the live map reflects every record held.
+    /// Records given to the live map (mappers): once it equals `records`, the live map
+    /// reflects every record held.
     pub mapped_records: u64,
     /// Publish→placement latency of the last placed scans, milliseconds: p50, p95, max
     /// (mappers; over every scan whose publish time is known).

@@ -23,8 +23,8 @@ pub struct WatchOptions {
     /// Stop once a mapper reports holding at least this many records (with `until_placed`:
     /// both).
     pub until_held: Option<u64>,
-    /// Stop once a mapper's last completed mapping run covered at least this many records
-    /// (with the other targets: once all hold).
+    /// Stop once a mapper's live map has been given at least this many records (with the
+    /// other targets: once all hold).
     pub until_mapped: Option<u64>,
     /// Stop after this long (then [`WatchSummary::reached`] is false when `until_placed`
     /// was set).

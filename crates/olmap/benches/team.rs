@@ -1,6 +1,7 @@
 //! Cooperative mapping on simulated data: the search of one sighted robot's scan along
 //! the sighting's locus (thesis (6.2)) against the global search of the same scan in the
-//! same target, and a small team map against the same scans mapped robot by robot.
+//! same target, a small team map against the same scans mapped robot by robot, and the
+//! demo's team placed record by record (the live map's incremental cost).
 //!
 //! `cargo bench -p olmap --bench team`. The poses each search evaluates and its error are
 //! printed once.
@@ -97,4 +98,65 @@ fn map_three_robots(bencher: Bencher, how: &str) {
             .map(|(_, m)| m.build.placed.len())
             .sum(),
     });
+}
+
+/// The demo's team (lab seed 1, 4 robots x 10 stops, degraded odometry), as a store.
+fn demo_team() -> &'static (olmap::team::ScanStore, olmap::geometry::PoseList) {
+    static D: OnceLock<(olmap::team::ScanStore, olmap::geometry::PoseList)> = OnceLock::new();
+    D.get_or_init(|| {
+        let config = SimConfig {
+            world: WorldKind::Lab,
+            seed: 1,
+            robots: 4,
+            stops: 10,
+            odometry: OdometryNoise::degraded(),
+            ..Default::default()
+        };
+        let data = simulate(&config, |_, _| {}).unwrap();
+        let store = data.to_store().unwrap();
+        let truth = data.truth_list(&store);
+        (store, truth)
+    })
+}
+
+/// Incremental placement (issue 23's incremental cost): the demo's 40 records given to a
+/// `LiveTeam` stop by stop, as a live mapper receives them, waiting scans retried after
+/// each; time per record is the divan time divided by 40. The placed count and the error
+/// against the truth are printed once.
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn live_team_record_by_record(bencher: Bencher) {
+    let (store, truth) = demo_team();
+    let mut records: Vec<_> = store.iter().collect();
+    records.sort_by_key(|s| (s.seq, s.robot));
+    let run = || {
+        let mut team = olmap::team::LiveTeam::new(TeamParams::default()).unwrap();
+        for scan in &records {
+            team.add(scan, &store.robot_name(scan.robot)).unwrap();
+            for _ in 0..100 {
+                if !team.has_due() {
+                    break;
+                }
+                team.retry_waiting(1).unwrap();
+            }
+        }
+        team
+    };
+    static PRINTED: OnceLock<()> = OnceLock::new();
+    PRINTED.get_or_init(|| {
+        let team = run();
+        let e = olmap::mapping::evaluate(&team.poses(), truth)
+            .unwrap()
+            .summary;
+        eprintln!(
+            "live team: {}/{} placed, {} registrations, mean {:.3} m, max {:.3} m",
+            team.placements().len(),
+            records.len(),
+            team.mapper().registrations(),
+            e.translation_m[0],
+            e.translation_m[2]
+        );
+    });
+    bencher
+        .counter(divan::counter::ItemsCount::new(records.len()))
+        .bench(run);
 }

@@ -280,7 +280,7 @@ fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     );
     match r.latency_ms {
         Some([p50, p95, max]) => println!(
-            "  publish->placement latency: p50 {p50:.0} ms, p95 {p95:.0} ms, max {max:.0} ms ({} mapping runs)",
+            "  publish->placement latency: p50 {p50:.0} ms, p95 {p95:.0} ms, max {max:.0} ms ({} live map updates)",
             r.map_runs
         ),
         None => println!("  no scan placed: no latency"),

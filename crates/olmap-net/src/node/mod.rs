@@ -45,11 +45,11 @@ pub(crate) fn now_ns() -> u64 {
 pub struct MapFigures {
     /// Scans placed per robot id.
     pub placed: BTreeMap<u32, u64>,
-    /// Occupied voxels.
+    /// Occupied voxels of the live map (updated when the mapper is idle).
     pub voxels: u64,
-    /// Mapping runs completed.
+    /// Live map updates: records given to it and waiting scans placed.
     pub runs: u64,
-    /// Records the last completed run mapped (the store as it was when the run started).
+    /// Records given to the live map so far.
     pub mapped_records: u64,
     /// Publish→placement latency of placed scans, ms: p50, p95, max.
     pub latency_ms: Option<[f64; 3]>,

@@ -21,10 +21,12 @@ struct Held {
 }
 
 /// A team map built a record at a time ([`LiveTeam::add`]), for a mapper that must answer
-/// while records arrive. The same links, clearing and registration as [`super::map_team`],
-/// but each scan is placed against the map as it is when the scan arrives (plus retries of
-/// waiting scans), not best overlap first over all records: run [`super::map_team`] on the
-/// same records for the offline answer. The map frame is the first record given.
+/// while records arrive. The links, clearing and registration of [`super::map_team`], made
+/// with the records held when each arrives, and each scan placed against the map as it is
+/// then (plus retries of waiting scans), not best overlap first over all records: run
+/// [`super::map_team`] on the same records for the offline answer. The map frame is the
+/// first record given; odometry predicts a robot's scan from its placed scan nearest in
+/// `seq`.
 ///
 /// ```
 /// use olmap::team::{LiveTeam, TeamParams};
@@ -45,6 +47,8 @@ pub struct LiveTeam {
     held: Vec<Held>,
     /// The odometry frame of each robot: robots in the order they first appeared.
     frames: HashMap<u32, usize>,
+    /// The index of each record held, by `(robot, seq)`.
+    index: HashMap<(u32, u32), usize>,
     /// Points of seen robots cleared so far.
     cleared_points: usize,
     /// Two-way sightings that failed the distractor test.
@@ -67,6 +71,7 @@ impl LiveTeam {
             params,
             held: Vec::new(),
             frames: HashMap::new(),
+            index: HashMap::new(),
             cleared_points: 0,
             rejected_mutual: 0,
         })
@@ -75,7 +80,8 @@ impl LiveTeam {
     /// Adds a record of robot `robot_name` (its scan is named `ROBOT/scanNNN`, as in
     /// [`super::map_team`]): links it to the records held taken at the same moment by the
     /// robots it saw or that saw it, and places it (or holds it; see [`ScanOutcome`]).
-    /// A record whose key is already held is an error.
+    /// A record whose key is already held is an error; so is one the mapper cannot take
+    /// (see [`IncrementalMapper::add_linked_scan`]), which is then not held.
     pub fn add(&mut self, scan: &StoredScan, robot_name: &str) -> Result<ScanOutcome> {
         if self.index_of(scan.robot, scan.seq).is_some() {
             return Err(crate::error::Error::InvalidArgument(format!(
@@ -84,15 +90,22 @@ impl LiveTeam {
             )));
         }
         let n = self.held.len();
-        let links = if self.params.sightings {
+        let (links, rejected) = if self.params.sightings {
             self.links_of(scan, n)
         } else {
-            Vec::new()
+            (Vec::new(), 0)
         };
         let (input, removed) = team_scan_input(scan, robot_name, &self.params)?;
-        self.cleared_points += removed;
         let next = self.frames.len();
-        let frame = *self.frames.entry(scan.robot).or_insert(next);
+        let frame = self.frames.get(&scan.robot).copied().unwrap_or(next);
+        let outcome = self
+            .mapper
+            .add_linked_scan(input, frame, u64::from(scan.seq), links)?;
+        // Taken: only now is the record held (indices stay those of the mapper).
+        self.frames.entry(scan.robot).or_insert(next);
+        self.cleared_points += removed;
+        self.rejected_mutual += rejected;
+        self.index.insert((scan.robot, scan.seq), n);
         self.held.push(Held {
             robot: scan.robot,
             seq: scan.seq,
@@ -102,13 +115,15 @@ impl LiveTeam {
                 ..scan.clone()
             },
         });
-        self.mapper.add_linked_scan(input, frame, links)
+        Ok(outcome)
     }
 
     /// The links of new record `scan` (index `n`) to the records held: its sightings of
     /// robots whose scan at that moment is held, and the held scans' sightings of its
-    /// robot for which it is the nearest in time.
-    fn links_of(&mut self, scan: &StoredScan, n: usize) -> Vec<ScanLink> {
+    /// robot for which it is the nearest in time; and how many two-way sightings failed the
+    /// distractor test. Nearest among the records held when it arrives: a nearer record
+    /// arriving later is linked too (the batch mapper links only the nearest).
+    fn links_of(&self, scan: &StoredScan, n: usize) -> (Vec<ScanLink>, usize) {
         let gap = self.params.max_time_gap;
         let times = || self.held.iter().map(|h| (h.robot, h.time)).enumerate();
         let mut links = Vec::new();
@@ -144,8 +159,7 @@ impl LiveTeam {
                 }
             }
         }
-        self.rejected_mutual += rejected;
-        links
+        (links, rejected)
     }
 
     /// Retries up to `max` waiting scans ([`IncrementalMapper::retry_waiting`]); returns the
@@ -168,9 +182,7 @@ impl LiveTeam {
 
     /// The index of record `(robot, seq)` if held.
     pub fn index_of(&self, robot: u32, seq: u32) -> Option<usize> {
-        self.held
-            .iter()
-            .position(|h| h.robot == robot && h.seq == seq)
+        self.index.get(&(robot, seq)).copied()
     }
 
     /// Records given so far.

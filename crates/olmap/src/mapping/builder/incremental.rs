@@ -26,7 +26,7 @@ pub enum ScanOutcome {
     Waiting(RejectedScan),
 }
 
-/// A map built a scan at a time (issue-free online use of the thesis' mapper): each scan
+/// A map built a scan at a time (online use of the thesis' mapper): each scan
 /// given is registered against the map as it is (along its sightings first, then in
 /// odometry windows that grow, globally only when it has neither), joins the map when the
 /// registration is trusted, and otherwise waits. The first scan given defines the map
@@ -102,21 +102,31 @@ impl IncrementalMapper {
     }
 
     /// Adds a scan of the single robot ([`IncrementalMapper::add_linked_scan`] in frame 0
-    /// without links).
+    /// without links, its capture order the order given).
     pub fn add_scan(&mut self, scan: ScanInput) -> Result<ScanOutcome> {
-        self.add_linked_scan(scan, 0, Vec::new())
+        let capture = self.attempted_at.len() as u64;
+        self.add_linked_scan(scan, 0, capture, Vec::new())
     }
 
-    /// Adds a scan taken in odometry frame `frame` (one per robot) with `links`: sightings
-    /// tying it to scans given before (by their index, the order they were given; each
-    /// link's reverse is added to the other scan, which is then retried). Places it when
-    /// its registration is trusted; the first scan given defines the map frame. A scan with
-    /// an odometry prediction or a link is never searched globally (a look-alike place can
-    /// win a global search); one with neither is, unless its robot waits for a sighting.
+    /// Adds a scan taken in odometry frame `frame` (one per robot), `capture`-th in its
+    /// frame (e.g. the robot's scan number: scans may arrive out of order; odometry
+    /// predicts a scan from the placed scan of its frame nearest in capture order), with
+    /// `links`: sightings tying it to scans given before (by their index, the order they
+    /// were given; each link's reverse is added to the other scan, which is then retried).
+    /// Places it when its registration is trusted; the first scan given defines the map
+    /// frame. A scan with an odometry prediction or a link is never searched globally (a
+    /// look-alike place can win a global search); one with neither is, unless its robot
+    /// waits for a sighting.
+    ///
+    /// Once this returns `Ok`, the mapper holds the scan (placed or waiting; a registration
+    /// that fails, e.g. on coordinates past the map's key range, leaves it waiting with the
+    /// error as its reason). An `Err` means it was not taken: a link to a scan not given,
+    /// or a first scan that cannot frame a map.
     pub fn add_linked_scan(
         &mut self,
         scan: ScanInput,
         frame: usize,
+        capture: u64,
         links: Vec<ScanLink>,
     ) -> Result<ScanOutcome> {
         let n = self.attempted_at.len();
@@ -127,20 +137,21 @@ impl IncrementalMapper {
                 l.other()
             )));
         }
-        self.placing.last_doubts.push(None);
-        self.attempted_at.push(None);
         let Some(state) = self.state.as_mut() else {
             return self.start(scan, frame, links);
         };
         for l in &links {
             self.attempted_at[l.other()] = None;
         }
-        let s = state.push_scan(scan, frame, links);
-        self.attempt(s)?;
+        let s = state.push_scan(scan, frame, capture, links);
+        self.placing.last_doubts.push(None);
+        self.attempted_at.push(None);
+        self.attempt_or_doubt(s);
         Ok(self.outcome(s))
     }
 
-    /// The first scan: it defines the map frame and sizes the search pyramid.
+    /// The first scan: it defines the map frame and sizes the search pyramid. Nothing is
+    /// kept when it fails.
     fn start(
         &mut self,
         scan: ScanInput,
@@ -159,12 +170,26 @@ impl IncrementalMapper {
         self.placing
             .placed
             .push(frame_record(0, &state.scans[0].name));
-        self.attempted_at[0] = Some(0);
+        self.placing.last_doubts.push(None);
+        self.attempted_at.push(Some(0));
         self.state = Some(state);
         Ok(self.outcome(0))
     }
 
-    /// One attempt to place unplaced scan `s`, remembered in [`Self::attempted_at`].
+    /// [`Self::attempt`], an error becoming the scan's doubt (it stays waiting, and is
+    /// retried only once the map has grown: see [`Self::due`]).
+    fn attempt_or_doubt(&mut self, s: usize) -> bool {
+        match self.attempt(s) {
+            Ok(placed) => placed,
+            Err(e) => {
+                self.placing.last_doubts[s] = Some(vec![format!("registration failed: {e}")]);
+                false
+            }
+        }
+    }
+
+    /// One attempt to place unplaced scan `s`, remembered in [`Self::attempted_at`]. When
+    /// it is placed, the waiting scans linked to it are due again.
     fn attempt(&mut self, s: usize) -> Result<bool> {
         let state = self.state.as_mut().expect("started");
         self.attempted_at[s] = Some(self.placing.placed.len());
@@ -175,7 +200,9 @@ impl IncrementalMapper {
             )]);
             return Ok(false);
         }
-        if state.far_from_map(s) {
+        // A scan with a placed sighting is searched along it even when its odometry says
+        // it lies outside the map (degraded odometry can say so wrongly).
+        if state.placed_links(s).is_empty() && state.far_from_map(s) {
             self.placing.last_doubts[s] =
                 Some(vec!["odometry puts it outside the map so far".to_string()]);
             return Ok(false);
@@ -184,6 +211,11 @@ impl IncrementalMapper {
         let placed = try_place(state, &mut self.placing, s, global)?;
         if placed {
             self.attempted_at[s] = Some(self.placing.placed.len());
+            for l in &state.team.links[s] {
+                if state.poses[l.other()].is_none() {
+                    self.attempted_at[l.other()] = None;
+                }
+            }
         }
         Ok(placed)
     }
@@ -208,9 +240,10 @@ impl IncrementalMapper {
         }
     }
 
-    /// Retries up to `max` waiting scans that may place now (the map grew since they were
-    /// tried, or they gained a link), those nearest the map first; returns the ones placed.
-    /// Call it when no new scan is queued: each retry costs one registration.
+    /// Retries up to `max` waiting scans that may place now (see [`Self::due`]), those
+    /// nearest the map first; returns the ones placed. Call it when no new scan is queued:
+    /// each retry costs a registration. A registration that fails leaves the scan waiting
+    /// with the error as its reason.
     pub fn retry_waiting(&mut self, max: usize) -> Result<Vec<PlacedScan>> {
         let Some(state) = self.state.as_ref() else {
             return Ok(Vec::new());
@@ -226,7 +259,7 @@ impl IncrementalMapper {
         });
         let mut placed = Vec::new();
         for (s, _) in due.into_iter().take(max) {
-            if self.attempt(s)? {
+            if self.attempt_or_doubt(s) {
                 placed.push(self.placing.placed.last().expect("just placed").clone());
             }
         }
@@ -241,11 +274,11 @@ impl IncrementalMapper {
         (0..state.scans.len()).any(|s| self.due(state, s))
     }
 
-    /// Whether waiting scan `s` is worth another attempt: it gained a link since its last
-    /// one, or the map grew since and odometry predicts it from a placed scan (a cheap
-    /// window search), or the map at least doubled since (a scan with neither a
-    /// prediction nor a new link is searched along its links or globally: costly, so
-    /// retried a logarithmic number of times).
+    /// Whether waiting scan `s` is worth another attempt: it gained a link, or a scan
+    /// linked to it was placed, since its last one; or the map grew since and odometry
+    /// predicts it from a placed scan (a cheap window search); or the map at least doubled
+    /// since (a scan with neither a prediction nor a new link is searched along its links
+    /// or globally: costly, so retried a logarithmic number of times).
     fn due(&self, state: &State<'static>, s: usize) -> bool {
         if state.poses[s].is_some() {
             return false;
@@ -296,18 +329,19 @@ impl IncrementalMapper {
     /// scans placed since the last call are fused now). No position buckets or count
     /// cleaning: [`IncrementalMapper::into_build`] applies those.
     pub fn map(&mut self) -> Result<&OccupancyList> {
-        let res = self.params.register.search.resolution;
-        let mut map = match self.fused.take() {
-            Some(m) => m,
-            None => OccupancyList::new(res)?,
-        };
+        if self.fused.is_none() {
+            self.fused = Some(OccupancyList::new(self.params.register.search.resolution)?);
+        }
+        let map = self.fused.as_mut().expect("just set");
         if let Some(state) = self.state.as_ref() {
-            for p in &self.placing.placed[self.fused_count..] {
+            // One scan at a time, counted as it is fused: a failure keeps what was fused.
+            while self.fused_count < self.placing.placed.len() {
+                let p = &self.placing.placed[self.fused_count];
                 map.insert_scan(&state.scans[p.index].cloud, &p.pose, &self.params.sensor)?;
+                self.fused_count += 1;
             }
         }
-        self.fused_count = self.placing.placed.len();
-        Ok(self.fused.insert(map))
+        Ok(map)
     }
 
     /// Makes the placed poses consistent with a pose graph of pairwise registrations,
@@ -336,9 +370,11 @@ impl IncrementalMapper {
         Ok(refined)
     }
 
-    /// The map as [`super::build_map`] returns it: the placed scans fused by ray tracing in
-    /// joining order (buckets, cleaning and scan maps as the parameters say), the waiting
-    /// scans as rejected.
+    /// The result in [`super::build_map`]'s form: the placed scans (placed as they came,
+    /// not best overlap first) fused by ray tracing in joining order (buckets, cleaning and
+    /// scan maps as the parameters say), the waiting scans as rejected. `graph` is `None`
+    /// (call [`IncrementalMapper::optimise`] first; [`MapParams::graph`] is not used here)
+    /// and `seconds` 0 (the time was spent scan by scan).
     pub fn into_build(self) -> Result<MapBuild> {
         let Some(state) = self.state.as_ref() else {
             return Err(Error::EmptyInput {

@@ -25,6 +25,12 @@ pub(super) struct State<'a> {
     clouds: Vec<Option<PointCloud>>,
     pub(super) params: Cow<'a, MapParams>,
     pub(super) team: Cow<'a, TeamLinks>,
+    /// Each scan's capture order within its frame (the batch mappers: the input index;
+    /// the incremental mapper: what the caller gives, e.g. the robot's seq, since scans
+    /// may arrive out of order). Odometry predicts from the placed scan nearest in it.
+    capture: Vec<u64>,
+    /// Whether `capture` is the input index (no sort needed to walk it).
+    capture_is_index: bool,
     pub(super) target: SearchTarget,
     pub(super) refine_map: PointCloud,
     /// `refine_map` prepared for ICP, made when a registration first needs it after the
@@ -65,6 +71,8 @@ impl<'a> State<'a> {
         let clouds = scans.iter().map(|s| band_cut(&s.cloud, &params)).collect();
         Ok(State {
             poses: vec![None; scans.len()],
+            capture: (0..scans.len() as u64).collect(),
+            capture_is_index: true,
             scans,
             clouds,
             params,
@@ -90,9 +98,12 @@ impl<'a> State<'a> {
         &mut self,
         scan: ScanInput,
         frame: usize,
+        capture: u64,
         links: Vec<ScanLink>,
     ) -> usize {
         let s = self.scans.len();
+        self.capture_is_index &= capture == s as u64;
+        self.capture.push(capture);
         self.clouds.push(band_cut(&scan.cloud, &self.params));
         self.scans.to_mut().push(scan);
         self.poses.push(None);
@@ -120,9 +131,9 @@ impl<'a> State<'a> {
     }
 
     /// The odometry prediction of scan `s` from the placed scan of its frame fewest scans
-    /// away in the input (input order is capture order: odometry drifts with every move,
-    /// so the scan nearest in position may be many moves and tens of degrees of drift
-    /// away), and the odometry path length between the two.
+    /// away in capture order (odometry drifts with every move, so the scan nearest in
+    /// position may be many moves and tens of degrees of drift away), and the odometry
+    /// path length between the two.
     pub(super) fn predict(&self, s: usize) -> Option<(Pose, f64)> {
         let odo_s = self.scans[s].odometry?;
         let p = self.predicts_from(s)?;
@@ -141,20 +152,30 @@ impl<'a> State<'a> {
             .filter(|(i, p)| p.is_some() && self.team.frame[*i] == self.team.frame[s])
             .filter(|(i, _)| self.scans[*i].odometry.is_some())
             .map(|(i, _)| i)
-            .min_by_key(|&i| (i.abs_diff(s), i))
+            .min_by_key(|&i| (self.capture[i].abs_diff(self.capture[s]), i))
     }
 
     /// The odometry path length between scans `a` and `b` of one frame: the moves between
-    /// the frame's scans with odometry, in input order.
+    /// the frame's scans with odometry, in capture order.
     pub(super) fn path_length(&self, a: usize, b: usize) -> f64 {
-        let (lo, hi) = (a.min(b), a.max(b));
+        let (lo, hi) = {
+            let (ca, cb) = (self.capture[a], self.capture[b]);
+            (ca.min(cb), ca.max(cb))
+        };
         let frame = self.team.frame[a];
+        let between: Vec<usize> = if self.capture_is_index {
+            (lo as usize..=hi as usize).collect()
+        } else {
+            let mut by_capture: Vec<(u64, usize)> = (0..self.scans.len())
+                .filter(|&i| (lo..=hi).contains(&self.capture[i]))
+                .map(|i| (self.capture[i], i))
+                .collect();
+            by_capture.sort_unstable();
+            by_capture.into_iter().map(|(_, i)| i).collect()
+        };
         let mut last: Option<Pose> = None;
         let mut length = 0.0;
-        for i in lo..=hi {
-            if self.team.frame[i] != frame {
-                continue;
-            }
+        for i in between.into_iter().filter(|&i| self.team.frame[i] == frame) {
             if let Some(odo) = self.scans[i].odometry {
                 if let Some(prev) = last {
                     length += (odo.translation() - prev.translation()).norm();
@@ -283,6 +304,8 @@ mod tests {
         let mut state = State {
             scans: Cow::Borrowed(&scans),
             clouds: vec![None; scans.len()],
+            capture: (0..scans.len() as u64).collect(),
+            capture_is_index: true,
             params: Cow::Borrowed(&params),
             team: Cow::Borrowed(&team),
             target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
