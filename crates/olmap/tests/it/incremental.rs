@@ -14,6 +14,23 @@ fn lab(seed: u64, robots: usize, stops: usize, odometry: OdometryNoise) -> SimDa
     crate::sim_lab(seed, robots, stops, odometry)
 }
 
+/// An incremental mapper with the team mapper's parameters, robots joining only through
+/// sightings.
+fn team_mapper() -> IncrementalMapper {
+    let mut settings = olmap::mapping::TeamLinks::none(0);
+    settings.hold_unlinked = true;
+    IncrementalMapper::with_team(TeamParams::default().map, settings).unwrap()
+}
+
+/// Robot `r`'s scan `k` of `data`, named as the team mapper names it, with its odometry.
+fn scan_input(data: &SimDataset, r: usize, k: usize) -> ScanInput {
+    ScanInput {
+        name: format!("robot{r}/scan{k:03}"),
+        cloud: data.robots[r].scans[k].clone(),
+        odometry: Some(data.robots[r].odometry[k]),
+    }
+}
+
 /// One robot in the lab with the thesis' degraded odometry (0.5 m / 10° per move), its
 /// scans given one at a time: each is placed when it arrives, within a map voxel (0.1 m)
 /// and 1° of the truth, as the batch mapper places the same scans. The pose graph then
@@ -108,14 +125,8 @@ fn records_given_out_of_order_are_all_placed() {
 #[test]
 fn an_unlinked_robot_waits_for_a_link() {
     let data = lab(2, 2, 2, OdometryNoise::degraded());
-    let mut settings = olmap::mapping::TeamLinks::none(0);
-    settings.hold_unlinked = true;
-    let mut mapper = IncrementalMapper::with_team(TeamParams::default().map, settings).unwrap();
-    let input = |r: usize, k: usize| ScanInput {
-        name: format!("robot{r}/scan{k:03}"),
-        cloud: data.robots[r].scans[k].clone(),
-        odometry: Some(data.robots[r].odometry[k]),
-    };
+    let mut mapper = team_mapper();
+    let input = |r: usize, k: usize| scan_input(&data, r, k);
     assert!(matches!(
         mapper
             .add_linked_scan(input(0, 0), 0, 0, Vec::new())
@@ -202,14 +213,8 @@ fn a_live_team_map_given_stop_by_stop_is_as_accurate_as_the_batch_map() {
 #[test]
 fn a_scan_linked_to_a_waiting_scan_is_retried_when_that_scan_is_placed() {
     let data = lab(2, 3, 2, OdometryNoise::degraded());
-    let mut settings = olmap::mapping::TeamLinks::none(0);
-    settings.hold_unlinked = true;
-    let mut mapper = IncrementalMapper::with_team(TeamParams::default().map, settings).unwrap();
-    let input = |r: usize, k: usize| ScanInput {
-        name: format!("robot{r}/scan{k:03}"),
-        cloud: data.robots[r].scans[k].clone(),
-        odometry: Some(data.robots[r].odometry[k]),
-    };
+    let mut mapper = team_mapper();
+    let input = |r: usize, k: usize| scan_input(&data, r, k);
     let truth = |r: usize, k: usize| data.robots[0].truth[0].inverse() * data.robots[r].truth[k];
     // `T_other_this` of a two-way sighting between scan (r, k) (other) and this one.
     let mutual =
