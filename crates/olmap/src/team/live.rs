@@ -146,6 +146,10 @@ impl LiveTeam {
             }
         }
         for (o, h) in self.held.iter().enumerate() {
+            // Only a record within the time gap can have the new one as its nearest.
+            if (h.time - scan.time).abs() > gap {
+                continue;
+            }
             for g in h.meta.sightings.iter().filter(|g| g.target == scan.robot) {
                 let with_new = times().chain(std::iter::once((n, (scan.robot, scan.time))));
                 if nearest_in_time(with_new, scan.robot, h.time, gap) == Some(n) {

@@ -63,6 +63,8 @@ pub struct IncrementalMapper {
     /// How many scans were placed when each scan was last tried (`None`: never, or its
     /// links changed since).
     attempted_at: Vec<Option<usize>>,
+    /// Failed attempts of each scan since it last gained a link (spaces its retries).
+    failures: Vec<usize>,
     /// The fused map of the first `fused_count` placed scans.
     fused: Option<OccupancyList>,
     fused_count: usize,
@@ -96,6 +98,7 @@ impl IncrementalMapper {
                 last_doubts: Vec::new(),
             },
             attempted_at: Vec::new(),
+            failures: Vec::new(),
             fused: None,
             fused_count: 0,
         })
@@ -142,10 +145,12 @@ impl IncrementalMapper {
         };
         for l in &links {
             self.attempted_at[l.other()] = None;
+            self.failures[l.other()] = 0;
         }
         let s = state.push_scan(scan, frame, capture, links);
         self.placing.last_doubts.push(None);
         self.attempted_at.push(None);
+        self.failures.push(0);
         self.attempt_or_doubt(s);
         Ok(self.outcome(s))
     }
@@ -172,6 +177,7 @@ impl IncrementalMapper {
             .push(frame_record(0, &state.scans[0].name));
         self.placing.last_doubts.push(None);
         self.attempted_at.push(Some(0));
+        self.failures.push(0);
         self.state = Some(state);
         Ok(self.outcome(0))
     }
@@ -193,6 +199,7 @@ impl IncrementalMapper {
     fn attempt(&mut self, s: usize) -> Result<bool> {
         let state = self.state.as_mut().expect("started");
         self.attempted_at[s] = Some(self.placing.placed.len());
+        self.failures[s] += 1;
         if state.unlinked(s) {
             self.placing.last_doubts[s] = Some(vec![format!(
                 "no sighting ties {}'s robot to the map yet",
@@ -214,6 +221,7 @@ impl IncrementalMapper {
             for l in &state.team.links[s] {
                 if state.poses[l.other()].is_none() {
                     self.attempted_at[l.other()] = None;
+                    self.failures[l.other()] = 0;
                 }
             }
         }
@@ -275,10 +283,11 @@ impl IncrementalMapper {
     }
 
     /// Whether waiting scan `s` is worth another attempt: it gained a link, or a scan
-    /// linked to it was placed, since its last one; or the map grew since and odometry
-    /// predicts it from a placed scan (a cheap window search); or the map at least doubled
-    /// since (a scan with neither a prediction nor a new link is searched along its links
-    /// or globally: costly, so retried a logarithmic number of times).
+    /// linked to it was placed, since its last one; or odometry predicts it from a placed
+    /// scan (window searches) and the map grew since by as many scans as it failed
+    /// attempts (a scan that keeps failing is retried less and less often); or the map at
+    /// least doubled since (a scan with neither a prediction nor a new link is searched
+    /// along its links or globally: costly, so retried a logarithmic number of times).
     fn due(&self, state: &State<'static>, s: usize) -> bool {
         if state.poses[s].is_some() {
             return false;
@@ -286,7 +295,7 @@ impl IncrementalMapper {
         let now = self.placing.placed.len();
         match self.attempted_at[s] {
             None => true,
-            Some(a) if state.predicts_from(s).is_some() => a < now,
+            Some(a) if state.predicts_from(s).is_some() => now >= a + self.failures[s].max(1),
             Some(a) => now >= 2 * a.max(1),
         }
     }
