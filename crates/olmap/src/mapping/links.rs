@@ -56,6 +56,25 @@ impl ScanLink {
         }
     }
 
+    /// The same link as the scan at its other end holds it, `this` being the index of the
+    /// scan that holds `self`: seen-by and saw swap, a mutual pose inverts.
+    pub(crate) fn reversed(&self, this: usize) -> ScanLink {
+        match self {
+            ScanLink::SeenBy { beacon, .. } => ScanLink::Saw {
+                other: this,
+                observed: *beacon,
+            },
+            ScanLink::Saw { observed, .. } => ScanLink::SeenBy {
+                other: this,
+                beacon: *observed,
+            },
+            ScanLink::Mutual { relative, .. } => ScanLink::Mutual {
+                other: this,
+                relative: relative.inverse(),
+            },
+        }
+    }
+
     /// Mutual links first (a full pose), then the loci.
     pub(crate) fn rank(&self) -> u8 {
         match self {

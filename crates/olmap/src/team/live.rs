@@ -4,21 +4,12 @@
 
 use std::collections::HashMap;
 
-use super::mapper::{nearest_in_time, sighting_links, team_scan_input, TeamParams};
+use super::mapper::{nearest_in_time, poses_of, sighting_links, team_scan_input, TeamParams};
 use super::store::StoredScan;
 use crate::error::Result;
 use crate::geometry::PoseList;
 use crate::mapping::{IncrementalMapper, PlacedScan, ScanLink, ScanOutcome, TeamLinks};
 use crate::occupancy::OccupancyList;
-
-/// What a live team keeps of each record given (not its cloud: the mapper holds that).
-struct Held {
-    robot: u32,
-    seq: u32,
-    time: f64,
-    /// The record without its cloud (for the sighting links of later records).
-    meta: StoredScan,
-}
 
 /// A team map built a record at a time ([`LiveTeam::add`]), for a mapper that must answer
 /// while records arrive. The links, clearing and registration of [`super::map_team`], made
@@ -44,7 +35,9 @@ struct Held {
 pub struct LiveTeam {
     params: TeamParams,
     mapper: IncrementalMapper,
-    held: Vec<Held>,
+    /// Each record given, without its cloud (the mapper holds that): for the sighting
+    /// links of later records.
+    held: Vec<StoredScan>,
     /// The odometry frame of each robot: robots in the order they first appeared.
     frames: HashMap<u32, usize>,
     /// The index of each record held, by `(robot, seq)`.
@@ -106,14 +99,9 @@ impl LiveTeam {
         self.cleared_points += removed;
         self.rejected_mutual += rejected;
         self.index.insert((scan.robot, scan.seq), n);
-        self.held.push(Held {
-            robot: scan.robot,
-            seq: scan.seq,
-            time: scan.time,
-            meta: StoredScan {
-                cloud: Default::default(),
-                ..scan.clone()
-            },
+        self.held.push(StoredScan {
+            cloud: Default::default(),
+            ..scan.clone()
         });
         Ok(outcome)
     }
@@ -135,7 +123,7 @@ impl LiveTeam {
         };
         for g in &scan.sightings {
             if let Some(t) = nearest_in_time(times(), g.target, scan.time, gap) {
-                let target = &self.held[t].meta;
+                let target = &self.held[t];
                 rejected += usize::from(!sighting_links(
                     (n, scan),
                     g,
@@ -150,11 +138,11 @@ impl LiveTeam {
             if (h.time - scan.time).abs() > gap {
                 continue;
             }
-            for g in h.meta.sightings.iter().filter(|g| g.target == scan.robot) {
+            for g in h.sightings.iter().filter(|g| g.target == scan.robot) {
                 let with_new = times().chain(std::iter::once((n, (scan.robot, scan.time))));
                 if nearest_in_time(with_new, scan.robot, h.time, gap) == Some(n) {
                     rejected += usize::from(!sighting_links(
-                        (o, &h.meta),
+                        (o, h),
                         g,
                         (n, scan),
                         &self.params,
@@ -206,11 +194,7 @@ impl LiveTeam {
 
     /// The placed scans' poses, named `ROBOT/scanNNN`, in joining order.
     pub fn poses(&self) -> PoseList {
-        let mut list = PoseList::default();
-        for p in self.mapper.placements() {
-            list.push(p.name.clone(), p.pose);
-        }
-        list
+        poses_of(self.mapper.placements())
     }
 
     /// The fused map of the placed scans ([`IncrementalMapper::map`]).

@@ -104,11 +104,7 @@ pub struct TeamMap {
 impl TeamMap {
     /// The placed scans' poses, named `ROBOT/scanNNN`.
     pub fn poses(&self) -> PoseList {
-        let mut list = PoseList::default();
-        for p in &self.build.placed {
-            list.push(p.name.clone(), p.pose);
-        }
-        list
+        poses_of(&self.build.placed)
     }
 
     /// `T_a_b`: robot `b`'s odometry frame in robot `a`'s, when both are in the map.
@@ -116,6 +112,15 @@ impl TeamMap {
         let frame = |r: u32| self.frames.iter().find(|f| f.robot == r)?.pose;
         Some(frame(a)?.inverse() * frame(b)?)
     }
+}
+
+/// The poses of placed scans, by name, in joining order.
+pub(super) fn poses_of(placed: &[crate::mapping::PlacedScan]) -> PoseList {
+    let mut list = PoseList::default();
+    for p in placed {
+        list.push(p.name.clone(), p.pose);
+    }
+    list
 }
 
 /// The name a scan has in the joint map.
@@ -300,39 +305,25 @@ pub(super) fn sighting_links(
     params: &TeamParams,
     mut add: impl FnMut(usize, ScanLink),
 ) -> bool {
-    add(
-        t,
-        ScanLink::SeenBy {
-            other: o,
-            beacon: g.beacon,
-        },
-    );
-    add(
-        o,
-        ScanLink::Saw {
-            other: t,
-            observed: g.beacon,
-        },
-    );
+    // Each link on `t`, and its reverse on `o`.
+    let mut both = |link: ScanLink| {
+        let reverse = link.reversed(t);
+        add(t, link);
+        add(o, reverse);
+    };
+    both(ScanLink::SeenBy {
+        other: o,
+        beacon: g.beacon,
+    });
     let back = target.sightings.iter().find(|b| b.target == obs.robot);
     if let (true, Some(back)) = (g.mutual && obs.robot < g.target, back) {
         let Some(t_o_t) = mutual_relative(g, back, params) else {
             return false;
         };
-        add(
-            t,
-            ScanLink::Mutual {
-                other: o,
-                relative: t_o_t,
-            },
-        );
-        add(
-            o,
-            ScanLink::Mutual {
-                other: t,
-                relative: t_o_t.inverse(),
-            },
-        );
+        both(ScanLink::Mutual {
+            other: o,
+            relative: t_o_t,
+        });
     }
     true
 }

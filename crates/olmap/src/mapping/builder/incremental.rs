@@ -8,7 +8,8 @@ use std::borrow::Cow;
 use super::sequential::try_place;
 use super::state::State;
 use super::{
-    frame_record, fuse, MapBuild, MapParams, PlacedScan, Placing, RejectedScan, ScanInput,
+    frame_record, fuse, rejected_scan, MapBuild, MapParams, PlacedScan, Placing, RejectedScan,
+    ScanInput,
 };
 use crate::error::{Error, Result};
 use crate::geometry::Pose;
@@ -238,14 +239,7 @@ impl IncrementalMapper {
 
     fn rejected(&self, s: usize) -> RejectedScan {
         let state = self.state.as_ref().expect("started");
-        RejectedScan {
-            index: s,
-            name: state.scans[s].name.clone(),
-            reasons: self.placing.last_doubts[s]
-                .clone()
-                .filter(|d| !d.is_empty())
-                .unwrap_or_else(|| vec!["no trusted alignment to the map".into()]),
-        }
+        rejected_scan(s, &state.scans[s].name, &self.placing.last_doubts[s])
     }
 
     /// Retries up to `max` waiting scans that may place now (see [`Self::due`]), those

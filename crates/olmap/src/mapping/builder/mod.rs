@@ -239,6 +239,19 @@ struct Placing {
     last_doubts: Vec<Option<Vec<String>>>,
 }
 
+/// The record of unplaced scan `index`: the doubts of its last untrusted registration, or
+/// a plain reason when it has none.
+fn rejected_scan(index: usize, name: &str, doubts: &Option<Vec<String>>) -> RejectedScan {
+    RejectedScan {
+        index,
+        name: name.to_string(),
+        reasons: doubts
+            .clone()
+            .filter(|d| !d.is_empty())
+            .unwrap_or_else(|| vec!["no trusted alignment to the map".into()]),
+    }
+}
+
 fn placed_record(
     index: usize,
     name: &str,
@@ -347,14 +360,7 @@ pub fn build_map_linked(
     };
     let rejected = (0..scans.len())
         .filter(|&s| state.poses[s].is_none())
-        .map(|s| RejectedScan {
-            index: s,
-            name: scans[s].name.clone(),
-            reasons: last_doubts[s]
-                .clone()
-                .filter(|d| !d.is_empty())
-                .unwrap_or_else(|| vec!["no trusted alignment to the map".into()]),
-        })
+        .map(|s| rejected_scan(s, &scans[s].name, &last_doubts[s]))
         .collect();
     let fused = fuse::fuse_placed(scans, &placed, params)?;
     Ok(MapBuild {

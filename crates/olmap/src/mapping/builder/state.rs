@@ -109,21 +109,7 @@ impl<'a> State<'a> {
         self.poses.push(None);
         let team = self.team.to_mut();
         for l in &links {
-            let back = match l {
-                ScanLink::SeenBy { beacon, .. } => ScanLink::Saw {
-                    other: s,
-                    observed: *beacon,
-                },
-                ScanLink::Saw { observed, .. } => ScanLink::SeenBy {
-                    other: s,
-                    beacon: *observed,
-                },
-                ScanLink::Mutual { relative, .. } => ScanLink::Mutual {
-                    other: s,
-                    relative: relative.inverse(),
-                },
-            };
-            team.links[l.other()].push(back);
+            team.links[l.other()].push(l.reversed(s));
         }
         team.frame.push(frame);
         team.links.push(links);
