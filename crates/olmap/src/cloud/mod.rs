@@ -9,8 +9,10 @@ mod laser_scan;
 mod point_cloud;
 mod report;
 mod stats;
+mod voxel_merge;
 
 pub use laser_scan::LaserScan;
 pub use point_cloud::PointCloud;
 pub use report::{BoxReport, RangeReport};
 pub use stats::{CloudStats, RangeStats};
+pub(crate) use voxel_merge::VoxelMerge;

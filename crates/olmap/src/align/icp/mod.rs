@@ -35,6 +35,10 @@
 //!   `T`, is paired with its nearest target point `q` (normal `n`) if that lies within the
 //!   current maximum correspondence distance `d`. The residual is the point-to-plane distance
 //!   `r = n · (T p - q)` (Chen & Medioni 1991).
+//!   The k-d tree is asked for the two nearest target points at distances `r1 ≤ r2`; while
+//!   the mapped point then moves by less than `(r2 - r1) / 2` the first stays the nearest
+//!   (triangle inequality), so later iterations, whose updates move points by millimetres,
+//!   skip most queries with exactly the same correspondences.
 //! * **Linearisation** (Low 2004). A small motion `δ = (ω, v)` applied on the left,
 //!   `T ← exp(δ) T`, changes the residual to first order by `((T p - c) × n) · ω + n · v`.
 //!   The rotation acts about `c`, the centroid of the mapped source points, rather than the
@@ -90,6 +94,7 @@
 //!   1992 (the accelerated ICP).
 
 mod degeneracy;
+mod nearest;
 mod params;
 mod reduce;
 mod solve;
@@ -100,6 +105,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 pub use self::degeneracy::Degeneracy;
+use self::nearest::NearestCache;
 pub use self::params::{IcpParams, RobustKernel};
 use self::reduce::{accumulate, statistics, Statistics};
 use self::solve::solve;
@@ -297,9 +303,12 @@ pub(crate) fn refine_prepared(
     let mut converged = false;
     let mut iterations = 0;
     let thin = src.coarse.as_ref();
-    let last: &Source = match depth {
-        Depth::Coarse => thin.unwrap_or(&src.fine),
-        Depth::Full | Depth::Finish => &src.fine,
+    // Each source remembers its points' nearest target points from pass to pass.
+    let mut fine_cache = NearestCache::new(src.fine.points.len());
+    let mut thin_cache = NearestCache::new(thin.map_or(0, |t| t.points.len()));
+    let (last, last_is_thin) = match (depth, thin) {
+        (Depth::Coarse, Some(t)) => (t, true),
+        _ => (&src.fine, false),
     };
     // The full source's last iterations are reserved a fifth of the budget (with fewer
     // than five iterations there is no thin stage).
@@ -315,6 +324,7 @@ pub(crate) fn refine_prepared(
                 params,
                 1.0,
                 budget,
+                &mut fine_cache,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else if depth == Depth::Full && reserve == 0 {
@@ -326,23 +336,38 @@ pub(crate) fn refine_prepared(
                 params,
                 1.0,
                 params.max_iterations,
+                &mut fine_cache,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else {
+            let (first_src, first_cache) = match thin {
+                Some(t) => (t, &mut thin_cache),
+                None => (&src.fine, &mut fine_cache),
+            };
             let first = schedule(
-                thin.unwrap_or(&src.fine),
+                first_src,
                 tgt,
                 pose,
                 params.max_distance_start,
                 params,
                 COARSE_EPSILON_FACTOR,
                 params.max_iterations - reserve,
+                first_cache,
             );
             (pose, converged, iterations) = (first.pose, first.converged, first.iterations);
             // A first stage that found too few correspondences (or no solution) ends it.
             if depth == Depth::Full && !first.stopped {
                 let budget = params.max_iterations - iterations;
-                let s = schedule(&src.fine, tgt, pose, first.d, params, 1.0, budget);
+                let s = schedule(
+                    &src.fine,
+                    tgt,
+                    pose,
+                    first.d,
+                    params,
+                    1.0,
+                    budget,
+                    &mut fine_cache,
+                );
                 (pose, converged) = (s.pose, s.converged);
                 iterations += s.iterations;
             }
@@ -350,6 +375,11 @@ pub(crate) fn refine_prepared(
     }
 
     // Statistics and degeneracy at the final pose and distance.
+    let last_cache = if last_is_thin {
+        &mut thin_cache
+    } else {
+        &mut fine_cache
+    };
     let Statistics {
         inlier_rms,
         inlier_fraction,
@@ -357,7 +387,7 @@ pub(crate) fn refine_prepared(
         degeneracy,
         hessian,
         inliers,
-    } = statistics(last, tgt, &pose, params);
+    } = statistics(last, tgt, &pose, params, last_cache);
     if correspondences < 6 {
         converged = false;
     }
@@ -389,7 +419,9 @@ struct Settled {
 
 /// The Gauss-Newton iterations with the shrinking correspondence distance (module
 /// documentation), from `pose` at distance `d`, on `src`, with the epsilons scaled by
-/// `eps_scale`, for at most `max_iterations`.
+/// `eps_scale`, for at most `max_iterations`; `cache` remembers `src`'s nearest target
+/// points.
+#[allow(clippy::too_many_arguments)]
 fn schedule(
     src: &Source,
     tgt: &Target,
@@ -398,6 +430,7 @@ fn schedule(
     params: &IcpParams,
     eps_scale: f64,
     max_iterations: usize,
+    cache: &mut NearestCache,
 ) -> Settled {
     let (eps_t, eps_r) = (
         params.translation_epsilon * eps_scale,
@@ -423,6 +456,7 @@ fn schedule(
             src.radius,
             params,
             false,
+            cache,
         );
         if acc.matched < min_matches {
             stopped = true;

@@ -2,10 +2,10 @@
 //! each point with its nearest target point and sums the weighted Gauss-Newton system, in
 //! fixed-size chunks added in chunk order (the same sums for any number of threads).
 
-use kiddo::SquaredEuclidean;
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rayon::prelude::*;
 
+use super::nearest::{nearest, NearestCache};
 use super::target::{Source, Target};
 use super::{Degeneracy, IcpParams};
 
@@ -92,7 +92,8 @@ impl Acc {
 }
 
 /// One pass over the source: correspondences at distance `d` for the pose `pose`, and the
-/// normal-equation sums linearised about `centre` with rotation scaled by `radius`.
+/// normal-equation sums linearised about `centre` with rotation scaled by `radius`;
+/// `cache` remembers each point's nearest target point between passes ([`super::nearest`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn accumulate(
     points: &[Point3<f64>],
@@ -103,25 +104,24 @@ pub(super) fn accumulate(
     radius: f64,
     params: &IcpParams,
     final_pass: bool,
+    cache: &mut NearestCache,
 ) -> Acc {
     let d2 = d * d;
     let scale = params.kernel_scale * d;
     let kernel = params.kernel;
     let partial: Vec<Acc> = points
         .par_chunks(CHUNK)
-        .map(|chunk| {
+        .zip(cache.entries.par_chunks_mut(CHUNK))
+        .map(|(chunk, memos)| {
             let mut acc = Acc::zero();
-            for p in chunk {
+            for (p, memo) in chunk.iter().zip(memos) {
                 let q = pose * p;
-                let nn = tgt
-                    .tree
-                    .query(&[q.x, q.y, q.z])
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute();
-                if nn.distance.is_nan() || nn.distance > d2 {
+                let Some((i, dist2)) = nearest(tgt, &q, memo) else {
+                    continue;
+                };
+                if dist2 > d2 {
                     continue;
                 }
-                let i = nn.item as usize;
                 let n = tgt.normal(i);
                 if n == Vector3::zeros() {
                     continue;
@@ -174,19 +174,31 @@ pub(super) struct Statistics {
 }
 
 /// The statistics and degeneracy at `pose` and the final correspondence distance
-/// (unconstrained, with no inlier, when there is no target or no source point).
+/// (unconstrained, with no inlier, when there is no target or no source point), with
+/// `cache` remembering `src`'s nearest target points.
 pub(super) fn statistics(
     src: &Source,
     tgt: Option<&Target>,
     pose: &Isometry3<f64>,
     params: &IcpParams,
+    cache: &mut NearestCache,
 ) -> Statistics {
     let pose = *pose;
     let (inlier_rms, inlier_fraction, correspondences, degeneracy, hessian, inliers) = match tgt {
         Some(tgt) if !src.points.is_empty() => {
             let d = params.max_distance_end;
             let centre = pose * src.centroid;
-            let acc = accumulate(&src.points, tgt, &pose, d, centre, src.radius, params, true);
+            let acc = accumulate(
+                &src.points,
+                tgt,
+                &pose,
+                d,
+                centre,
+                src.radius,
+                params,
+                true,
+                cache,
+            );
             let rms = if acc.inliers > 0 {
                 (acc.sum_r2 / acc.inliers as f64).sqrt()
             } else {

@@ -162,7 +162,22 @@ impl IcpTarget {
     pub fn new(target: &PointCloud, params: &IcpParams) -> Result<Self> {
         params.validate()?;
         Ok(IcpTarget {
-            inner: Target::new(target, params)?,
+            inner: Target::new(target, params, None)?,
+            prepared_with: Preparation::of(params),
+        })
+    }
+
+    /// [`IcpTarget::new`] for a cloud that is already one point per voxel of `voxel`
+    /// metres (a [`crate::cloud::VoxelMerge`]'s): when the target voxel is the same, the
+    /// downsampling would change nothing and is skipped.
+    pub(crate) fn of_voxel_centroids(
+        target: &PointCloud,
+        params: &IcpParams,
+        voxel: f64,
+    ) -> Result<Self> {
+        params.validate()?;
+        Ok(IcpTarget {
+            inner: Target::new(target, params, Some(voxel))?,
             prepared_with: Preparation::of(params),
         })
     }
@@ -205,9 +220,14 @@ pub(super) struct Target {
 }
 
 impl Target {
-    /// `None` when the target has no finite point.
-    fn new(target: &PointCloud, params: &IcpParams) -> Result<Option<Self>> {
-        let cloud = if params.target_voxel > 0.0 {
+    /// `None` when the target has no finite point; `downsampled_at`: the voxel `target`
+    /// was already downsampled at, if any.
+    fn new(
+        target: &PointCloud,
+        params: &IcpParams,
+        downsampled_at: Option<f64>,
+    ) -> Result<Option<Self>> {
+        let cloud = if params.target_voxel > 0.0 && downsampled_at != Some(params.target_voxel) {
             Cow::Owned(target.voxel_downsample(params.target_voxel)?)
         } else {
             Cow::Borrowed(target)

@@ -153,7 +153,7 @@ impl State<'_> {
         if let Some(p) = self.refine_prepared.get() {
             return Ok(p);
         }
-        let p = IcpTarget::new(&self.refine_map, icp)?;
+        let p = IcpTarget::of_voxel_centroids(&self.refine_map, icp, self.params.refine_map_voxel)?;
         Ok(self.refine_prepared.get_or_init(|| p))
     }
 

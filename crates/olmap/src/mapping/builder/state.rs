@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 use super::{levels_from_extent, MapParams, ScanInput};
 use crate::align::icp::IcpTarget;
 use crate::align::SearchTarget;
-use crate::cloud::PointCloud;
+use crate::cloud::{PointCloud, VoxelMerge};
 use crate::error::Result;
 use crate::geometry::{Aabb, Pose};
 use crate::mapping::links::{ScanLink, TeamLinks};
@@ -32,6 +32,10 @@ pub(super) struct State<'a> {
     /// Whether `capture` is the input index (no sort needed to walk it).
     capture_is_index: bool,
     pub(super) target: SearchTarget,
+    /// The placed scans' points merged at [`MapParams::refine_map_voxel`]: what
+    /// `refine_map` is made from, grown a scan at a time.
+    refine_merge: VoxelMerge,
+    /// The points the refinement aligns to (`refine_merge`'s voxel centroids).
     pub(super) refine_map: PointCloud,
     /// `refine_map` prepared for ICP, made when a registration first needs it after the
     /// map changed.
@@ -69,6 +73,7 @@ impl<'a> State<'a> {
         let res = params.register.search.resolution;
         let levels = levels_from_extent(&scans[params.first], &params);
         let clouds = scans.iter().map(|s| band_cut(&s.cloud, &params)).collect();
+        let refine_merge = VoxelMerge::new(params.refine_map_voxel)?;
         Ok(State {
             poses: vec![None; scans.len()],
             capture: (0..scans.len() as u64).collect(),
@@ -78,6 +83,7 @@ impl<'a> State<'a> {
             params,
             team,
             target: SearchTarget::from_scans(&[], res, levels)?,
+            refine_merge,
             refine_map: PointCloud::new(),
             refine_prepared: OnceLock::new(),
             registrations: AtomicUsize::new(0),
@@ -236,6 +242,7 @@ impl<'a> State<'a> {
         let res = self.params.register.search.resolution;
         let levels = self.target.pyramid().levels();
         self.target = SearchTarget::from_scans(&[], res, levels)?;
+        self.refine_merge = VoxelMerge::new(self.params.refine_map_voxel)?;
         self.refine_map = PointCloud::new();
         self.refine_prepared = OnceLock::new();
         self.map_box = None;
@@ -256,11 +263,8 @@ impl<'a> State<'a> {
         }
         self.target.add_scan(cloud, &pose)?;
         // ICP refines against the whole scans (the floor fixes the height a band leaves free).
-        self.refine_map
-            .extend_from(&self.scans[s].cloud.transformed(&pose));
-        self.refine_map = self
-            .refine_map
-            .voxel_downsample(self.params.refine_map_voxel)?;
+        self.refine_merge.add(&self.scans[s].cloud, &pose)?;
+        self.refine_map = self.refine_merge.cloud();
         self.refine_prepared = OnceLock::new();
         self.poses[s] = Some(pose);
         Ok(())
@@ -295,6 +299,7 @@ mod tests {
             params: Cow::Borrowed(&params),
             team: Cow::Borrowed(&team),
             target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
+            refine_merge: VoxelMerge::new(0.05).unwrap(),
             refine_map: PointCloud::new(),
             refine_prepared: OnceLock::new(),
             poses: vec![None; scans.len()],
