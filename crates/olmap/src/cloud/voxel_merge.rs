@@ -125,7 +125,11 @@ mod tests {
         let mut points = Vec::new();
         for i in 0..30 {
             for j in 0..20 {
-                points.push(Point3::new(1.0013, i as f32 * 0.03 + 0.0011, j as f32 * 0.03 + 0.0017));
+                points.push(Point3::new(
+                    1.0013,
+                    i as f32 * 0.03 + 0.0011,
+                    j as f32 * 0.03 + 0.0017,
+                ));
             }
         }
         let n = points.len();

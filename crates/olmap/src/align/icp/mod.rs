@@ -447,17 +447,7 @@ fn schedule(
         iterations += 1;
         let at_end = d <= params.max_distance_end;
         let centre = pose * src.centroid;
-        let acc = accumulate(
-            &src.points,
-            tgt,
-            &pose,
-            d,
-            centre,
-            src.radius,
-            params,
-            false,
-            cache,
-        );
+        let acc = accumulate(src, tgt, &pose, d, params, false, cache);
         if acc.matched < min_matches {
             stopped = true;
             break;

@@ -2,7 +2,7 @@
 //! each point with its nearest target point and sums the weighted Gauss-Newton system, in
 //! fixed-size chunks added in chunk order (the same sums for any number of threads).
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Vector3, Vector6};
 use rayon::prelude::*;
 
 use super::nearest::{nearest, NearestCache};
@@ -91,21 +91,20 @@ impl Acc {
     }
 }
 
-/// One pass over the source: correspondences at distance `d` for the pose `pose`, and the
-/// normal-equation sums linearised about `centre` with rotation scaled by `radius`;
-/// `cache` remembers each point's nearest target point between passes ([`super::nearest`]).
-#[allow(clippy::too_many_arguments)]
+/// One pass over the source `src`: correspondences at distance `d` for the pose `pose`,
+/// and the normal-equation sums linearised about the mapped source centroid with rotation
+/// scaled by the source's RMS radius; `cache` remembers each point's nearest target point
+/// between passes ([`super::nearest`]).
 pub(super) fn accumulate(
-    points: &[Point3<f64>],
+    src: &Source,
     tgt: &Target,
     pose: &Isometry3<f64>,
     d: f64,
-    centre: Point3<f64>,
-    radius: f64,
     params: &IcpParams,
     final_pass: bool,
     cache: &mut NearestCache,
 ) -> Acc {
+    let (points, centre, radius) = (&src.points, pose * src.centroid, src.radius);
     let d2 = d * d;
     let scale = params.kernel_scale * d;
     let kernel = params.kernel;
@@ -186,15 +185,11 @@ pub(super) fn statistics(
     let pose = *pose;
     let (inlier_rms, inlier_fraction, correspondences, degeneracy, hessian, inliers) = match tgt {
         Some(tgt) if !src.points.is_empty() => {
-            let d = params.max_distance_end;
-            let centre = pose * src.centroid;
             let acc = accumulate(
-                &src.points,
+                src,
                 tgt,
                 &pose,
-                d,
-                centre,
-                src.radius,
+                params.max_distance_end,
                 params,
                 true,
                 cache,
