@@ -317,21 +317,29 @@ pub fn consistency_seen(
     pose: &Pose,
 ) -> Result<Consistency> {
     let res = target.resolution();
-    let mut moved = OccupancyList::new(res)?;
-    moved.add_points(source, pose, 1);
-    let source_side = count_side(
-        &surface(&moved),
-        &pose.transform_point(&source.origin()),
-        target,
+    // The two sides are independent: counted side by side.
+    let (source_side, target_side) = rayon::join(
+        || -> Result<SideAgreement> {
+            let mut moved = OccupancyList::new(res)?;
+            moved.add_points(source, pose, 1);
+            Ok(count_side(
+                &surface(&moved),
+                &pose.transform_point(&source.origin()),
+                target,
+            ))
+        },
+        || -> Result<Option<SideAgreement>> {
+            match (target_points, seen_from_source) {
+                (Some(t), Some(seen)) if !t.is_empty() => {
+                    let mut back = OccupancyList::new(res)?;
+                    back.add_points(t, &pose.inverse(), 1);
+                    Ok(Some(count_side(&surface(&back), &source.origin(), seen)))
+                }
+                _ => Ok(None),
+            }
+        },
     );
-    let target_side = match (target_points, seen_from_source) {
-        (Some(t), Some(seen)) if !t.is_empty() => {
-            let mut back = OccupancyList::new(res)?;
-            back.add_points(t, &pose.inverse(), 1);
-            Some(count_side(&surface(&back), &source.origin(), seen))
-        }
-        _ => None,
-    };
+    let (source_side, target_side) = (source_side?, target_side?);
     Ok(Consistency {
         source: source_side,
         target: target_side,

@@ -35,7 +35,9 @@
 use std::time::Instant;
 
 use super::consistency::{consistency_seen, source_view, Consistency};
-use super::icp::{refine_prepared, Depth, IcpParams, IcpResult, IcpSource, IcpTarget};
+use super::icp::{
+    refine_prepared, Depth, IcpParams, IcpResult, IcpSource, IcpTarget, NearestMemory,
+};
 use super::lattice::{Alignment, Candidate};
 use super::target::SearchTarget;
 use crate::cloud::PointCloud;
@@ -250,8 +252,11 @@ pub(super) fn verify(
     // search's resolution).
     let thin = IcpSource::new(source, icp)?;
     let mut hypotheses: Vec<Hypothesis> = Vec::new();
+    // Each hypothesis' nearest target points, from its thin stage to its finishing.
+    let mut memories: Vec<NearestMemory> = Vec::new();
     for start in starts {
         let near = near(&start.pose);
+        let mut memory = NearestMemory::new(&thin);
         let refinement = refine_prepared(
             &thin,
             prepared,
@@ -260,6 +265,7 @@ pub(super) fn verify(
             Depth::Coarse,
             0,
             Instant::now(),
+            &mut memory,
         );
         let at = if refinement.converged {
             refinement.pose
@@ -272,6 +278,7 @@ pub(super) fn verify(
             continue;
         }
         let c = consistency_seen(source, seen.as_ref(), target, Some(&near), &at)?;
+        memories.push(memory);
         hypotheses.push(Hypothesis {
             start,
             refinement,
@@ -300,6 +307,7 @@ pub(super) fn verify(
         .collect();
     for i in finish {
         let h = &mut hypotheses[i];
+        let memory = &mut memories[i];
         let full = if h.refinement.converged {
             // Where the thin stage left it: together, what `refine` does from the start.
             let mut f = refine_prepared(
@@ -310,6 +318,7 @@ pub(super) fn verify(
                 Depth::Finish,
                 h.refinement.iterations,
                 Instant::now(),
+                memory,
             );
             f.iterations += h.refinement.iterations;
             f.seconds += h.refinement.seconds;
@@ -323,6 +332,7 @@ pub(super) fn verify(
                 Depth::Full,
                 0,
                 Instant::now(),
+                memory,
             )
         };
         let moved = (full.pose, full.converged) != (h.refinement.pose, h.refinement.converged);

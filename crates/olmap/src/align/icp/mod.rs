@@ -35,10 +35,12 @@
 //!   `T`, is paired with its nearest target point `q` (normal `n`) if that lies within the
 //!   current maximum correspondence distance `d`. The residual is the point-to-plane distance
 //!   `r = n · (T p - q)` (Chen & Medioni 1991).
-//!   The k-d tree is asked for the two nearest target points at distances `r1 ≤ r2`; while
-//!   the mapped point then moves by less than `(r2 - r1) / 2` the first stays the nearest
-//!   (triangle inequality), so later iterations, whose updates move points by millimetres,
-//!   skip most queries with exactly the same correspondences.
+//!   The k-d tree is asked for the four nearest target points and they are kept with `R`,
+//!   the farthest one's distance; after the mapped point moved by `δ`, every other target
+//!   point is at least `R - δ` away, so while the nearest of the four is closer than that
+//!   it is the nearest of all (triangle inequality): later iterations, whose updates move
+//!   points by millimetres, skip most queries with exactly the same correspondences, and a
+//!   hypothesis' finishing stage starts from what its thin stage kept.
 //! * **Linearisation** (Low 2004). A small motion `δ = (ω, v)` applied on the left,
 //!   `T ← exp(δ) T`, changes the residual to first order by `((T p - c) × n) · ω + n · v`.
 //!   The rotation acts about `c`, the centroid of the mapped source points, rather than the
@@ -106,6 +108,7 @@ use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector
 
 pub use self::degeneracy::Degeneracy;
 use self::nearest::NearestCache;
+pub(crate) use self::nearest::NearestMemory;
 pub use self::params::{IcpParams, RobustKernel};
 use self::reduce::{accumulate, statistics, Statistics};
 use self::solve::solve;
@@ -274,6 +277,7 @@ fn refine_from(
     started: Instant,
 ) -> Result<IcpResult> {
     let src = IcpSource::new(source, params)?;
+    let mut memory = NearestMemory::new(&src);
     Ok(refine_prepared(
         &src,
         target,
@@ -282,13 +286,16 @@ fn refine_from(
         Depth::Full,
         0,
         started,
+        &mut memory,
     ))
 }
 
 /// [`refine_to`] with the source prepared too (parameters and initial pose already
 /// checked), to `depth`; `spent` iterations were already spent on this refinement (by the
 /// [`Depth::Coarse`] run a [`Depth::Finish`] continues; 0 otherwise): the stages together
-/// run at most [`IcpParams::max_iterations`].
+/// run at most [`IcpParams::max_iterations`]. `memory` keeps the sources' nearest target
+/// points for the next stage of the same refinement (against the same target).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn refine_prepared(
     src: &IcpSource,
     target: &IcpTarget,
@@ -297,6 +304,7 @@ pub(crate) fn refine_prepared(
     depth: Depth,
     spent: usize,
     started: Instant,
+    memory: &mut NearestMemory,
 ) -> IcpResult {
     let tgt = target.inner.as_ref();
     let mut pose = *initial.isometry();
@@ -304,8 +312,11 @@ pub(crate) fn refine_prepared(
     let mut iterations = 0;
     let thin = src.coarse.as_ref();
     // Each source remembers its points' nearest target points from pass to pass.
-    let mut fine_cache = NearestCache::new(src.fine.points.len());
-    let mut thin_cache = NearestCache::new(thin.map_or(0, |t| t.points.len()));
+    memory.fit(src);
+    let NearestMemory {
+        fine: fine_cache,
+        thin: thin_cache,
+    } = memory;
     let (last, last_is_thin) = match (depth, thin) {
         (Depth::Coarse, Some(t)) => (t, true),
         _ => (&src.fine, false),
@@ -324,7 +335,7 @@ pub(crate) fn refine_prepared(
                 params,
                 1.0,
                 budget,
-                &mut fine_cache,
+                fine_cache,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else if depth == Depth::Full && reserve == 0 {
@@ -336,13 +347,13 @@ pub(crate) fn refine_prepared(
                 params,
                 1.0,
                 params.max_iterations,
-                &mut fine_cache,
+                fine_cache,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else {
             let (first_src, first_cache) = match thin {
-                Some(t) => (t, &mut thin_cache),
-                None => (&src.fine, &mut fine_cache),
+                Some(t) => (t, &mut *thin_cache),
+                None => (&src.fine, &mut *fine_cache),
             };
             let first = schedule(
                 first_src,
@@ -359,14 +370,7 @@ pub(crate) fn refine_prepared(
             if depth == Depth::Full && !first.stopped {
                 let budget = params.max_iterations - iterations;
                 let s = schedule(
-                    &src.fine,
-                    tgt,
-                    pose,
-                    first.d,
-                    params,
-                    1.0,
-                    budget,
-                    &mut fine_cache,
+                    &src.fine, tgt, pose, first.d, params, 1.0, budget, fine_cache,
                 );
                 (pose, converged) = (s.pose, s.converged);
                 iterations += s.iterations;
@@ -375,11 +379,7 @@ pub(crate) fn refine_prepared(
     }
 
     // Statistics and degeneracy at the final pose and distance.
-    let last_cache = if last_is_thin {
-        &mut thin_cache
-    } else {
-        &mut fine_cache
-    };
+    let last_cache = if last_is_thin { thin_cache } else { fine_cache };
     let Statistics {
         inlier_rms,
         inlier_fraction,

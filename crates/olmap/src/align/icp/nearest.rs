@@ -1,17 +1,21 @@
 //! Nearest target points, remembered between iterations where that is provably exact.
 //!
-//! Each query asks the k-d tree for the two nearest target points of a mapped source point
-//! `q`, at distances `r1 ≤ r2`. When the point later moves to `q'` with `|q' - q| = δ`, the
-//! first is at most `r1 + δ` away and every other at least `r2 - δ`, so while
-//! `δ < (r2 - r1) / 2` the nearest point is still the first and no query is needed. Late in
-//! a refinement the updates move points by millimetres and most points skip their query;
-//! the correspondences are exactly those of a fresh query every time (a tie, `r1 = r2`,
-//! always asks again), so the result does not change.
+//! Each query asks the k-d tree for the [`CANDIDATES`] nearest target points of a mapped
+//! source point `q` and keeps them, with `R`, the distance of the farthest of them. When the
+//! point later moves to `q'` with `|q' - q| = δ`, every other target point is at least
+//! `R - δ` from `q'`; so if the nearest of the kept points is closer than that, it is the
+//! nearest of all, and no query is needed. Late in a refinement the updates move points by
+//! millimetres and most points skip their query; the correspondences are exactly those of
+//! a fresh query every time (up to which of two target points exactly equidistant from
+//! `q'` is taken), so the result does not change.
 
 use kiddo::SquaredEuclidean;
 use nalgebra::Point3;
 
-use super::target::Target;
+use super::target::{IcpSource, Target};
+
+/// Target points kept per source point.
+pub(super) const CANDIDATES: usize = 4;
 
 /// A safety margin on the movement test against rounding (metres).
 const MARGIN: f64 = 1e-9;
@@ -21,22 +25,24 @@ const MARGIN: f64 = 1e-9;
 pub(super) struct Remembered {
     /// Where the point was when the tree was asked.
     at: Point3<f64>,
-    /// The nearest target point.
-    item: u32,
-    /// How far the point may move with `item` staying the nearest: `(r2 - r1) / 2`
-    /// (negative: nothing remembered).
-    slack: f64,
+    /// The nearest target points then, nearest first (`len` of them).
+    items: [u32; CANDIDATES],
+    len: u8,
+    /// The distance of the farthest of them (infinite when the tree holds no other
+    /// point; negative: nothing remembered).
+    reach: f64,
 }
 
 impl Remembered {
     const NONE: Remembered = Remembered {
         at: Point3::new(0.0, 0.0, 0.0),
-        item: 0,
-        slack: -1.0,
+        items: [0; CANDIDATES],
+        len: 0,
+        reach: -1.0,
     };
 }
 
-/// The remembered nearest target point of every point of one source (index for index).
+/// The remembered nearest target points of every point of one source (index for index).
 pub(super) struct NearestCache {
     pub(super) entries: Vec<Remembered>,
 }
@@ -50,41 +56,81 @@ impl NearestCache {
     }
 }
 
+/// What one refinement remembers of its sources' nearest target points (the full source and
+/// the thin one), to hand from one stage of the refinement to the next against the same
+/// target (a hypothesis' thin stage and its finishing).
+pub(crate) struct NearestMemory {
+    pub(super) fine: NearestCache,
+    pub(super) thin: NearestCache,
+}
+
+impl NearestMemory {
+    /// Nothing remembered for `src`'s points.
+    pub(crate) fn new(src: &IcpSource) -> Self {
+        NearestMemory {
+            fine: NearestCache::new(src.fine.points.len()),
+            thin: NearestCache::new(src.coarse.as_ref().map_or(0, |t| t.points.len())),
+        }
+    }
+
+    /// `self` as it can serve `src` (emptied when it was made for another source's size).
+    pub(super) fn fit(&mut self, src: &IcpSource) {
+        let thin = src.coarse.as_ref().map_or(0, |t| t.points.len());
+        if self.fine.entries.len() != src.fine.points.len() || self.thin.entries.len() != thin {
+            *self = NearestMemory::new(src);
+        }
+    }
+}
+
 /// The nearest target point of `q` and its squared distance (`None` for an empty tree),
-/// from `memo` when `q` has not moved far enough to change it, else from the tree (and
-/// remembered).
+/// from `memo` when the nearest of its kept points is provably the nearest of all, else
+/// from the tree (and remembered).
 #[inline]
 pub(super) fn nearest(
     tgt: &Target,
     q: &Point3<f64>,
     memo: &mut Remembered,
 ) -> Option<(usize, f64)> {
-    if memo.slack > 0.0 && (q - memo.at).norm() + MARGIN < memo.slack {
-        let i = memo.item as usize;
-        return Some((i, (q - tgt.points[i]).norm_squared()));
+    if memo.len > 0 {
+        let moved = (q - memo.at).norm();
+        let mut best = (memo.items[0] as usize, f64::INFINITY);
+        for &i in &memo.items[..memo.len as usize] {
+            let d2 = (q - tgt.points[i as usize]).norm_squared();
+            if d2 < best.1 {
+                best = (i as usize, d2);
+            }
+        }
+        if best.1.sqrt() + moved + MARGIN < memo.reach {
+            return Some(best);
+        }
     }
-    let two = tgt
+    let found = tgt
         .tree
         .query(&[q.x, q.y, q.z])
-        .nearest_n::<SquaredEuclidean<f64>>(std::num::NonZeroUsize::new(2).expect("2 > 0"))
+        .nearest_n::<SquaredEuclidean<f64>>(
+            std::num::NonZeroUsize::new(CANDIDATES).expect("CANDIDATES > 0"),
+        )
         .execute();
-    let first = two.first()?;
-    if first.distance.is_nan() {
+    let first = found.first()?;
+    if found.iter().any(|r| r.distance.is_nan()) {
         *memo = Remembered::NONE;
         return None;
     }
-    let i = first.item as usize;
-    let r1 = first.distance.sqrt();
-    let slack = match two.get(1) {
-        Some(second) if !second.distance.is_nan() => 0.5 * (second.distance.sqrt() - r1),
-        Some(_) => -1.0,
-        None => f64::INFINITY,
-    };
+    let mut items = [0; CANDIDATES];
+    for (slot, r) in items.iter_mut().zip(&found) {
+        *slot = r.item;
+    }
     *memo = Remembered {
         at: *q,
-        item: first.item,
-        slack,
+        items,
+        len: found.len() as u8,
+        reach: if found.len() < CANDIDATES {
+            f64::INFINITY
+        } else {
+            found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
+        },
     };
+    let i = first.item as usize;
     Some((i, (q - tgt.points[i]).norm_squared()))
 }
 
@@ -149,7 +195,7 @@ mod tests {
                 // (The two planes share a line of points: compare distances, not indices.)
                 assert_eq!(d2, (q - tgt.points[brute(&q)]).norm_squared(), "at {q:?}");
                 assert_eq!(d2, (q - tgt.points[i]).norm_squared());
-                if memo.at == before && memo.slack > 0.0 {
+                if memo.at == before {
                     remembered += 1;
                 } else {
                     asked += 1;
