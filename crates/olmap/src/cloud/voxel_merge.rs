@@ -10,10 +10,13 @@ use crate::error::{Error, Result};
 use crate::geometry::{Pose, VoxelKey};
 
 /// Clouds merged on a voxel grid: one point per voxel, the centroid of the points added to
-/// it (the same points as [`PointCloud::voxel_downsample`] of all the added clouds
-/// together, up to the rounding of the sums). Normals are averaged as long as every added
-/// cloud has them; intensity and colours are not kept. Voxels keep the order in which they
-/// were first filled.
+/// it (the same points as [`PointCloud::voxel_downsample`] of all the added clouds moved
+/// and concatenated, up to rounding: the voxel of a point is taken from its moved position
+/// in f64, not from an f32 copy, so a point within rounding of a voxel face may fall on the
+/// other side). Normals are averaged as long as every cloud added to a non-empty merge has
+/// them (an empty merge takes them from the next cloud, as [`PointCloud::extend_from`]
+/// does); intensity and colours are not kept. Voxels keep the order in which they were
+/// first filled.
 #[derive(Debug, Clone)]
 pub(crate) struct VoxelMerge {
     resolution: f64,
@@ -62,6 +65,10 @@ impl VoxelMerge {
                 )
             })?;
             keys.push(key);
+        }
+        if self.sums.is_empty() {
+            // An empty merge takes its attributes from the next cloud.
+            self.normals = Some(Vec::new());
         }
         let normals = match (&mut self.normals, cloud.normals()) {
             (Some(sums), Some(given)) => Some((sums, given)),
@@ -171,6 +178,15 @@ mod tests {
             .unwrap();
         assert!(merge.cloud().normals().is_none());
         assert_eq!(merge.cloud().len(), expected.len() + 1);
+    }
+
+    /// An empty merge takes its normals from the next cloud, as `extend_from` does.
+    #[test]
+    fn an_empty_merge_takes_the_next_clouds_normals() {
+        let mut merge = VoxelMerge::new(0.05).unwrap();
+        merge.add(&PointCloud::new(), &Pose::identity()).unwrap();
+        merge.add(&wall(), &Pose::identity()).unwrap();
+        assert!(merge.cloud().normals().is_some());
     }
 
     /// A point whose voxel index does not fit is an error and adds nothing.

@@ -40,7 +40,8 @@
 //!   point is at least `R - δ` away, so while the nearest of the four is closer than that
 //!   it is the nearest of all (triangle inequality): later iterations, whose updates move
 //!   points by millimetres, skip most queries with exactly the same correspondences, and a
-//!   hypothesis' finishing stage starts from what its thin stage kept.
+//!   hypothesis' finishing stage starts from what its first stage kept (when that stage
+//!   ran on the full source, the default).
 //! * **Linearisation** (Low 2004). A small motion `δ = (ω, v)` applied on the left,
 //!   `T ← exp(δ) T`, changes the residual to first order by `((T p - c) × n) · ω + n · v`.
 //!   The rotation acts about `c`, the centroid of the mapped source points, rather than the
@@ -312,10 +313,11 @@ pub(crate) fn refine_prepared(
     let mut iterations = 0;
     let thin = src.coarse.as_ref();
     // Each source remembers its points' nearest target points from pass to pass.
-    memory.fit(src);
+    memory.fit(src, tgt.map_or(0, |t| t.points.len()));
     let NearestMemory {
         fine: fine_cache,
         thin: thin_cache,
+        ..
     } = memory;
     let (last, last_is_thin) = match (depth, thin) {
         (Depth::Coarse, Some(t)) => (t, true),

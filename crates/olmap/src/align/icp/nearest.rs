@@ -58,10 +58,15 @@ impl NearestCache {
 
 /// What one refinement remembers of its sources' nearest target points (the full source and
 /// the thin one), to hand from one stage of the refinement to the next against the same
-/// target (a hypothesis' thin stage and its finishing).
+/// target: a hypothesis' finishing starts from what its first stage kept when that stage
+/// ran on the full source (no thin source, the default), and a rerun from the start
+/// reuses the thin source's.
 pub(crate) struct NearestMemory {
     pub(super) fine: NearestCache,
     pub(super) thin: NearestCache,
+    /// The target points the kept indices refer to (a memory must never be used with
+    /// another target: see [`NearestMemory::fit`]).
+    target_points: Option<usize>,
 }
 
 impl NearestMemory {
@@ -70,15 +75,23 @@ impl NearestMemory {
         NearestMemory {
             fine: NearestCache::new(src.fine.points.len()),
             thin: NearestCache::new(src.coarse.as_ref().map_or(0, |t| t.points.len())),
+            target_points: None,
         }
     }
 
-    /// `self` as it can serve `src` (emptied when it was made for another source's size).
-    pub(super) fn fit(&mut self, src: &IcpSource) {
+    /// `self` as it can serve `src` against a target of `target_points` points: emptied
+    /// when it was made for another source's size or used with a target of another size.
+    /// (Callers hand a memory on only between refinements against one target; the size
+    /// check is a guard, not the rule.)
+    pub(super) fn fit(&mut self, src: &IcpSource, target_points: usize) {
         let thin = src.coarse.as_ref().map_or(0, |t| t.points.len());
-        if self.fine.entries.len() != src.fine.points.len() || self.thin.entries.len() != thin {
+        if self.fine.entries.len() != src.fine.points.len()
+            || self.thin.entries.len() != thin
+            || self.target_points.is_some_and(|n| n != target_points)
+        {
             *self = NearestMemory::new(src);
         }
+        self.target_points = Some(target_points);
     }
 }
 
@@ -111,25 +124,36 @@ pub(super) fn nearest(
             std::num::NonZeroUsize::new(CANDIDATES).expect("CANDIDATES > 0"),
         )
         .execute();
-    let first = found.first()?;
+    let Some(first) = found.first() else {
+        *memo = Remembered::NONE;
+        return None;
+    };
     if found.iter().any(|r| r.distance.is_nan()) {
         *memo = Remembered::NONE;
         return None;
     }
-    let mut items = [0; CANDIDATES];
-    for (slot, r) in items.iter_mut().zip(&found) {
-        *slot = r.item;
-    }
-    *memo = Remembered {
-        at: *q,
-        items,
-        len: found.len() as u8,
-        reach: if found.len() < CANDIDATES {
-            f64::INFINITY
-        } else {
-            found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
-        },
+    // Every target point is kept when the tree holds no more than `CANDIDATES`; otherwise
+    // the farthest kept one bounds all the others, and only a finite bound is kept.
+    let all_kept = tgt.points.len() <= found.len();
+    let reach = if all_kept {
+        f64::INFINITY
+    } else {
+        found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
     };
+    if !(all_kept || reach.is_finite()) {
+        *memo = Remembered::NONE;
+    } else {
+        let mut items = [0; CANDIDATES];
+        for (slot, r) in items.iter_mut().zip(&found) {
+            *slot = r.item;
+        }
+        *memo = Remembered {
+            at: *q,
+            items,
+            len: found.len() as u8,
+            reach,
+        };
+    }
     let i = first.item as usize;
     Some((i, (q - tgt.points[i]).norm_squared()))
 }
@@ -151,8 +175,8 @@ mod tests {
         Point3::new(u() * s, u() * s, u() * s)
     }
 
-    /// Points walking in small random steps: every answer, remembered or asked, is the
-    /// as near as the nearest target point a scan of all of them finds, and most late answers are
+    /// Points walking in small random steps: every answer, remembered or asked, is as near
+    /// as the nearest target point a scan of all of them finds, and many answers are
     /// remembered.
     #[test]
     fn remembered_answers_are_the_nearest_points() {
