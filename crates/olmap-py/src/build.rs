@@ -82,8 +82,10 @@ impl PyMapBuild {
 ///         when the match there is not trusted).
 ///     resolution: voxel edge of the map and of the finest search level, metres
 ///         (default 0.1).
-///     mode: ``"batch"`` (default: the best-overlapping scan joins next) or
-///         ``"sequential"`` (input order).
+///     mode: ``"batch"`` (default: the best-overlapping scan joins next),
+///         ``"sequential"`` (input order, each scan tried once) or ``"incremental"``
+///         (input order, a scan that cannot be placed yet is retried as the map grows;
+///         ``first`` must be 0).
 ///     dof: ``"xy-yaw"``, ``"xyz-yaw"`` (default) or ``"6dof"``.
 ///     max_tilt: ``"6dof"`` only: largest roll and pitch searched, degrees (default 15).
 ///     max_range: ignore points farther than this from their sensor, metres (default 30).
@@ -192,9 +194,10 @@ pub fn build_map(
         mode: match mode {
             "batch" => MapMode::Batch,
             "sequential" => MapMode::Sequential,
+            "incremental" => MapMode::Incremental,
             other => {
                 return Err(value_error(format!(
-                    "mode: expected \"batch\" or \"sequential\", got {other:?}"
+                    "mode: expected \"batch\", \"sequential\" or \"incremental\", got {other:?}"
                 )))
             }
         },

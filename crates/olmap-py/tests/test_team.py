@@ -110,6 +110,21 @@ def test_build_map_with_odometry_places_simulated_scans_at_the_truth(small):
     assert build.report["scans"] == 3
 
 
+def test_incremental_mode_places_scans_in_the_order_given_with_the_first_as_frame(small):
+    scans, odo, truth = small.scans(0), small.odometry(0), small.truth(0)
+    build = olmap.build_map(scans, odometry=odo, mode="incremental")
+    # Every scan places on arrival here, so the incremental mapper gives the sequential
+    # mapper's poses exactly (the same placement step), and both are at the truth.
+    sequential = olmap.build_map(scans, odometry=odo, mode="sequential")
+    first = np.linalg.inv(truth[0])
+    for k, (pose, other, t) in enumerate(zip(build.poses, sequential.poses, truth)):
+        assert pose is not None and np.array_equal(pose, other), k
+        assert np.linalg.norm(pose[:3, 3] - (first @ t)[:3, 3]) < 0.1, k
+    # Its frame is the first scan given: naming another is refused.
+    with pytest.raises(ValueError, match="first in the input"):
+        olmap.build_map(scans, odometry=odo, mode="incremental", first=1)
+
+
 def test_progress_callbacks_report_and_their_errors_surface(small):
     calls = []
     olmap.build_map(small.scans(0), progress=lambda *a: calls.append(a))

@@ -21,8 +21,12 @@ use crate::args::{set_threads, DofArgs, StageBars, ThreadsArgs};
 pub enum ModeArg {
     /// Best overlap first (thesis §6.4.1): robust to scans in any order.
     Batch,
-    /// In the given order (online).
+    /// In the given order (online), each scan aligned once to the map so far.
     Sequential,
+    /// In the given order, one at a time, as a live mapper receives them: a scan that
+    /// cannot be placed yet waits and is retried as the map grows (the first scan is the
+    /// map frame; --first is refused).
+    Incremental,
 }
 
 /// Arguments of `olmap map`.
@@ -57,7 +61,7 @@ pub struct MapArgs {
     /// scan path, map entropy after each scan, tables).
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
-    /// Batch (default) or sequential.
+    /// Batch (default), sequential or incremental.
     #[arg(long, value_enum, default_value = "batch")]
     pub mode: ModeArg,
     /// Voxel edge of the map and of the finest search level, metres.
@@ -147,6 +151,7 @@ fn map_params(a: &MapArgs) -> anyhow::Result<MapParams> {
         mode: match a.mode {
             ModeArg::Batch => MapMode::Batch,
             ModeArg::Sequential => MapMode::Sequential,
+            ModeArg::Incremental => MapMode::Incremental,
         },
         sensor: SensorModel {
             max_range: a.max_range,

@@ -5,7 +5,8 @@
 use olmap::geometry::PoseError;
 use olmap::mapping::posegraph::GraphRefineParams;
 use olmap::mapping::{
-    build_map, evaluate, IncrementalMapper, MapParams, Placement, ScanInput, ScanLink, ScanOutcome,
+    build_map, evaluate, IncrementalMapper, MapMode, MapParams, Placement, ScanInput, ScanLink,
+    ScanOutcome,
 };
 use olmap::sim::{OdometryNoise, SimDataset};
 use olmap::team::{map_team, LiveTeam, TeamParams};
@@ -62,6 +63,24 @@ fn one_robot_scan_by_scan_is_placed_on_arrival_and_stays_right_after_the_graph()
     // The batch mapper on the same five scans places them too (same registrations).
     let batch = build_map(&scans[..5], &MapParams::default(), |_, _| {}).unwrap();
     assert_eq!(batch.placed.len(), 5);
+    // `build_map` in incremental mode is this mapper, run offline: the same poses.
+    let incremental = MapParams {
+        mode: MapMode::Incremental,
+        ..Default::default()
+    };
+    let offline = build_map(&scans[..5], &incremental, |_, _| {}).unwrap();
+    let poses = |placed: &[olmap::mapping::PlacedScan]| {
+        placed.iter().map(|p| (p.index, p.pose)).collect::<Vec<_>>()
+    };
+    assert_eq!(poses(&offline.placed), poses(mapper.placements()));
+    assert_eq!(offline.scan_maps.len(), 5);
+    // Its frame is the first scan given: naming another is refused, not reordered.
+    let other_first = MapParams {
+        first: 2,
+        ..incremental
+    };
+    let e = build_map(&scans[..5], &other_first, |_, _| {}).unwrap_err();
+    assert!(e.to_string().contains("first in the input"), "{e}");
 
     let refined = mapper.optimise(&GraphRefineParams::default()).unwrap();
     assert_eq!(refined.poses.len(), 5);

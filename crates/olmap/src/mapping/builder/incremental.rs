@@ -397,3 +397,57 @@ impl IncrementalMapper {
         })
     }
 }
+
+/// [`super::build_map_linked`] in [`super::MapMode::Incremental`]: the scans given to an
+/// [`IncrementalMapper`] in input order (capture order = input index), each with its links
+/// to the scans given before (the mapper adds their reverses), the waiting scans retried
+/// after each until none is due; then the graph refinement when asked for, and the fused
+/// map. The inputs were checked by the caller.
+pub(super) fn map_in_order(
+    scans: &[ScanInput],
+    params: &MapParams,
+    team: &TeamLinks,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<MapBuild> {
+    let start = std::time::Instant::now();
+    if params.first != 0 {
+        return Err(Error::InvalidArgument(format!(
+            "incremental mapping takes the scans in the order given and frames the map with \
+             the first of them: put {} first in the input instead of naming it as the frame",
+            scans[params.first].name
+        )));
+    }
+    let settings = TeamLinks {
+        frame: Vec::new(),
+        links: Vec::new(),
+        ..team.clone()
+    };
+    let mut mapper = IncrementalMapper::with_team(params.clone(), settings)?;
+    let n = scans.len();
+    for (s, scan) in scans.iter().enumerate() {
+        let links: Vec<ScanLink> = team.links[s]
+            .iter()
+            .filter(|l| l.other() < s)
+            .cloned()
+            .collect();
+        mapper.add_linked_scan(scan.clone(), team.frame[s], s as u64, links)?;
+        // Each round either places a scan or leaves every scan it tried not due (due
+        // scans need the map to have grown since their last attempt): at most n rounds.
+        for _ in 0..n {
+            if !mapper.has_due() || mapper.retry_waiting(n)?.is_empty() {
+                break;
+            }
+        }
+        progress(mapper.placements().len(), n);
+    }
+    let graph = match &params.graph {
+        Some(g) => Some(mapper.optimise(g)?),
+        None => None,
+    };
+    let registrations = mapper.registrations();
+    let mut build = mapper.into_build()?;
+    build.graph = graph;
+    build.registrations = registrations;
+    build.seconds = start.elapsed().as_secs_f64();
+    Ok(build)
+}

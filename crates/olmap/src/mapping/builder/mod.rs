@@ -45,6 +45,12 @@ pub enum MapMode {
     Batch,
     /// Scans join in the given order, each aligned to the map so far (online use).
     Sequential,
+    /// Scans are given one at a time, in the given order, to an [`IncrementalMapper`]:
+    /// each is placed against the map as it is then, or waits and is retried once the map
+    /// has grown (before the next scan is given). What a live mapper does as a robot
+    /// delivers its scans, run offline. The frame scan must be the first
+    /// ([`MapParams::first`] 0); [`MapParams::graph`] refines the poses at the end.
+    Incremental,
 }
 
 /// Parameters of [`build_map`].
@@ -52,7 +58,7 @@ pub enum MapMode {
 pub struct MapParams {
     /// Registration (search, refinement, trust) of each scan against the map.
     pub register: RegisterParams,
-    /// Batch or sequential.
+    /// Batch, sequential or incremental.
     pub mode: MapMode,
     /// Index of the scan that defines the map frame (default 0).
     pub first: usize,
@@ -328,6 +334,9 @@ pub fn build_map_linked(
 ) -> Result<MapBuild> {
     let start = Instant::now();
     check_inputs(scans, params, team)?;
+    if params.mode == MapMode::Incremental {
+        return incremental::map_in_order(scans, params, team, progress);
+    }
     let first = &scans[params.first];
     let mut state = State::new(
         Cow::Borrowed(scans),
@@ -343,6 +352,7 @@ pub fn build_map_linked(
     match params.mode {
         MapMode::Sequential => sequential::place_in_order(&mut state, &mut placing, &mut progress)?,
         MapMode::Batch => batch::place_best_first(&mut state, &mut placing, &mut progress)?,
+        MapMode::Incremental => unreachable!("handled above"),
     }
     let Placing {
         mut placed,
