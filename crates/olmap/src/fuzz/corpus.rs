@@ -56,6 +56,21 @@ pub fn corpus(data: Option<&Path>) -> Result<Vec<Sample>> {
     Ok(out)
 }
 
+/// Lines of a CARMEN log kept as a sample (a `FLASER` line holds 180 ranges).
+#[cfg(feature = "gzip")]
+const CARMEN_LINES: usize = 30;
+
+/// The first `limit` bytes of the gzip stream `bytes`, decompressed.
+#[cfg(feature = "gzip")]
+fn gunzip_head(bytes: &[u8], limit: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut out = Vec::new();
+    flate2::read::GzDecoder::new(bytes)
+        .take(limit)
+        .read_to_end(&mut out)?;
+    Ok(out)
+}
+
 /// The first `n` lines of a text.
 fn head(bytes: &[u8], n: usize) -> Vec<u8> {
     let end = bytes
@@ -92,6 +107,16 @@ fn real_files(dir: &Path) -> Result<Vec<Sample>> {
         "3dtk_dat/frames_history/scan001.frames.38966dfc",
     ] {
         out.push(Sample::new(rel, Target::Frames3dtk, read(rel)?));
+    }
+    #[cfg(feature = "gzip")]
+    {
+        let rel = "carmen_2d/intel-corrected.log.gz";
+        let text = gunzip_head(&read(rel)?, 1 << 18).map_err(|e| Error::io(dir.join(rel), e))?;
+        out.push(Sample::new(
+            format!("{rel} (first {CARMEN_LINES} lines)"),
+            Target::CarmenLog,
+            head(&text, CARMEN_LINES),
+        ));
     }
     out.push(Sample::new(
         "3dtk_dat/reference_poses_rh_m.txt",
@@ -370,6 +395,13 @@ fn own_files() -> Result<Vec<Sample>> {
         Target::MirrorLog,
         to_bytes("mirror log", |w| mirror_log().write(w))?,
     ));
+    out.push(Sample::new(
+        "CARMEN log",
+        Target::CarmenLog,
+        CARMEN_SAMPLE.as_bytes().to_vec(),
+    ));
+    #[cfg(feature = "bag")]
+    out.extend(ros_messages(&cloud));
     let scan = laser_scan();
     out.push(Sample::new(
         "olmap laser scan CSV",
@@ -449,6 +481,73 @@ fn mirror_log() -> MirrorLog {
         sweeps,
         events,
     }
+}
+
+/// A CARMEN log as the shared logs write it: parameters, odometry, and front-laser scans
+/// (`FLASER n r1..rn x y theta odom_x odom_y odom_theta time host logger_time`), one with
+/// a beam at the no-return range.
+const CARMEN_SAMPLE: &str = "\
+# CARMEN Logfile
+PARAM robot_front_laser_max 81.9 nohost 0
+ODOM 0.0 0.0 0.0 0 0 0 1.0 nohost 1.0
+FLASER 5 1.25 2.5 3.75 81.9 0.5 0.1 0.2 0.05 0.1 0.2 0.05 1.5 nohost 1.5
+FLASER 5 1.2 2.4 3.7 4.9 0.55 0.4 0.2 0.06 0.4 0.2 0.06 2.5 nohost 2.5
+";
+
+/// A ROS 2 point cloud (the small cloud), laser scan and transform message, CDR-encoded
+/// as a bag stores them.
+#[cfg(feature = "bag")]
+fn ros_messages(cloud: &PointCloud) -> Vec<Sample> {
+    use io::bag::cdr::CdrWriter;
+    use io::bag::messages::{encode_tf, Header, PointCloud2, Stamp, TransformStamped};
+    let header = |frame: &str| Header {
+        stamp: Stamp::from_nanos(1_700_000_000_123_456_789),
+        frame_id: frame.into(),
+    };
+    let (fields, point_step, data) = io::bag::pointcloud2::encode_points(cloud);
+    let n = cloud.len() as u32;
+    let points = PointCloud2 {
+        header: header("lidar"),
+        height: 1,
+        width: n,
+        fields,
+        is_bigendian: false,
+        point_step,
+        row_step: point_step * n,
+        data: &data,
+        is_dense: false,
+    }
+    .encode();
+    let mut w = CdrWriter::new();
+    w.i32(1_700_000_000);
+    w.u32(5);
+    w.string("laser");
+    for v in [-1.5f32, 1.5, 0.75, 0.0, 0.1, 0.05, 30.0] {
+        w.f32(v);
+    }
+    let ranges = [1.0f32, f32::INFINITY, 2.5, 40.0, f32::NAN];
+    w.u32(ranges.len() as u32);
+    ranges.iter().for_each(|&r| w.f32(r));
+    w.u32(ranges.len() as u32);
+    ranges.iter().for_each(|_| w.f32(100.0));
+    let scan = w.finish();
+    let tf = encode_tf(&[
+        TransformStamped {
+            header: header("map"),
+            child_frame_id: "odom".into(),
+            transform: Pose::from_xyz_ypr(1.0, -2.0, 0.1, 0.3, 0.0, 0.0),
+        },
+        TransformStamped {
+            header: header("odom"),
+            child_frame_id: "base_link".into(),
+            transform: Pose::identity(),
+        },
+    ]);
+    vec![
+        Sample::new("ROS 2 PointCloud2", Target::PointCloud2Message, points),
+        Sample::new("ROS 2 LaserScan", Target::LaserScanMessage, scan),
+        Sample::new("ROS 2 TFMessage", Target::TfMessage, tf),
+    ]
 }
 
 /// A 2D scan with intensities and a beam without return.

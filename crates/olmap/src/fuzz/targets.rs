@@ -38,6 +38,21 @@ pub enum Target {
     LaserScanCsv,
     /// A 2D laser scan as JSON ([`LaserScan::read_json`]), then its points.
     LaserScanJson,
+    /// A CARMEN 2D laser log's text ([`io::carmen::parse_carmen`]), then every scan's
+    /// points.
+    CarmenLog,
+    /// A ROS 2 `sensor_msgs/PointCloud2` message as a bag stores it (CDR), decoded
+    /// ([`io::bag::messages::PointCloud2::decode`]) and its points read
+    /// ([`io::bag::pointcloud2::decode_points`]).
+    #[cfg(feature = "bag")]
+    PointCloud2Message,
+    /// A ROS 2 `sensor_msgs/LaserScan` message (CDR,
+    /// [`io::bag::messages::LaserScan::decode`]).
+    #[cfg(feature = "bag")]
+    LaserScanMessage,
+    /// A ROS 2 `tf2_msgs/TFMessage` (CDR, [`io::bag::messages::decode_tf`]).
+    #[cfg(feature = "bag")]
+    TfMessage,
 }
 
 impl Target {
@@ -56,6 +71,13 @@ impl Target {
             Target::MirrorLog => "mirror log".into(),
             Target::LaserScanCsv => "laser scan CSV".into(),
             Target::LaserScanJson => "laser scan JSON".into(),
+            Target::CarmenLog => "CARMEN log".into(),
+            #[cfg(feature = "bag")]
+            Target::PointCloud2Message => "ROS 2 PointCloud2".into(),
+            #[cfg(feature = "bag")]
+            Target::LaserScanMessage => "ROS 2 LaserScan".into(),
+            #[cfg(feature = "bag")]
+            Target::TfMessage => "ROS 2 TFMessage".into(),
         }
     }
 
@@ -87,8 +109,36 @@ impl Target {
             }
             Target::LaserScanCsv => Ok(LaserScan::read_csv(bytes)?.to_cloud().len()),
             Target::LaserScanJson => Ok(LaserScan::read_json(bytes)?.to_cloud().len()),
+            Target::CarmenLog => {
+                let log = io::carmen::parse_carmen(bytes)?;
+                Ok(log
+                    .scans
+                    .iter()
+                    .map(|s| s.points(log.max_range, 0.0).len())
+                    .sum())
+            }
+            #[cfg(feature = "bag")]
+            Target::PointCloud2Message => {
+                use io::bag::{messages::PointCloud2, pointcloud2::decode_points};
+                let message = PointCloud2::decode(bytes).map_err(cdr)?;
+                let decoded = decode_points(&message).map_err(ParseError::Malformed)?;
+                Ok(decoded.cloud.len())
+            }
+            #[cfg(feature = "bag")]
+            Target::LaserScanMessage => Ok(io::bag::messages::LaserScan::decode(bytes)
+                .map_err(cdr)?
+                .ranges
+                .len()),
+            #[cfg(feature = "bag")]
+            Target::TfMessage => Ok(io::bag::messages::decode_tf(bytes).map_err(cdr)?.len()),
         }
     }
+}
+
+/// A CDR decoding error as a parse error.
+#[cfg(feature = "bag")]
+fn cdr(e: io::bag::cdr::CdrError) -> ParseError {
+    ParseError::Malformed(e.to_string())
 }
 
 #[cfg(feature = "bzip2")]

@@ -447,7 +447,9 @@ fn check_sizes<R: Read + Seek>(source: &mut R, size: u64) -> Result<Option<u64>,
             )));
         }
         let vlrs = VlrSpan {
-            first: u64::from(raw.header_size),
+            // Where the `las` crate reads them: after the version's whole header, even when
+            // the header claims to be shorter (then its size only shifts the offsets).
+            first: u64::from(raw.header_size.max(raw.version.header_size())),
             count: raw.number_of_variable_length_records,
             end: start,
         };

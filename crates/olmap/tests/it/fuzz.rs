@@ -188,11 +188,16 @@ fn fuzz_short_pass_over_every_reader() {
         "laser scan CSV",
         "laser scan JSON",
         "bzip2 XYZ text",
+        "CARMEN log",
     ] {
         assert!(names.contains(&needed), "{needed} not fuzzed: {names:?}");
     }
     #[cfg(feature = "las")]
     assert!(names.contains(&"LAS/LAZ"), "LAS/LAZ not fuzzed: {names:?}");
+    #[cfg(feature = "bag")]
+    for needed in ["ROS 2 PointCloud2", "ROS 2 LaserScan", "ROS 2 TFMessage"] {
+        assert!(names.contains(&needed), "{needed} not fuzzed: {names:?}");
+    }
 }
 
 #[test]

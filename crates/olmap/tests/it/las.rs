@@ -237,6 +237,18 @@ fn cut_and_lying_files_are_typed_errors() {
     lying[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
     let e = parse_error(read_bytes("chunks.laz", &lying).unwrap_err());
     assert!(e.to_string().contains("chunk table"), "{e}");
+    // COPC (layered LAZ) whose first chunk announces a 4 GB layer, with the header's size
+    // field cut below LAS 1.4's 375 bytes: the `las` crate still reads the VLRs after the
+    // whole header, and so must the layer check (found by the fuzzer: LASzip allocated the
+    // 4 GB before failing). Layer 0's size follows the chunk's first raw point record
+    // (36 bytes in format 7) and its point count.
+    let start = u32::from_le_bytes(copc[96..100].try_into().unwrap()) as usize;
+    let mut lying = copc.clone();
+    lying[94..96].copy_from_slice(&343u16.to_le_bytes());
+    let layer0 = start + 8 + 36 + 4;
+    lying[layer0..layer0 + 4].copy_from_slice(&0xF000_0000u32.to_le_bytes());
+    let e = parse_error(read_bytes("layers.copc.laz", &lying).unwrap_err());
+    assert!(e.to_string().contains("LAZ layer 0"), "{e}");
     // Streams give the same errors.
     let e = io::read_cloud_from(&las[..1000], CloudFormat::Las, &ReadOptions::default());
     assert!(matches!(e, Err(ParseError::Truncated(_))));
