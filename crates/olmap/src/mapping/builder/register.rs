@@ -153,7 +153,8 @@ impl State<'_> {
         if let Some(p) = self.refine_prepared.get() {
             return Ok(p);
         }
-        let p = IcpTarget::of_voxel_centroids(&self.refine_map, icp, self.params.refine_map_voxel)?;
+        let p =
+            IcpTarget::of_voxel_centroids(self.refine_points(), icp, self.params.refine_map_voxel)?;
         Ok(self.refine_prepared.get_or_init(|| p))
     }
 
@@ -179,7 +180,7 @@ impl State<'_> {
             self.cloud(s),
             &self.scans[s].cloud,
             &self.target,
-            &self.refine_map,
+            self.refine_points(),
             prepared,
             params,
             on_edge,

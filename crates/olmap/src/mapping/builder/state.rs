@@ -32,11 +32,12 @@ pub(super) struct State<'a> {
     /// Whether `capture` is the input index (no sort needed to walk it).
     capture_is_index: bool,
     pub(super) target: SearchTarget,
-    /// The placed scans' points merged at [`MapParams::refine_map_voxel`]: what
-    /// `refine_map` is made from, grown a scan at a time.
+    /// The placed scans' points merged at [`MapParams::refine_map_voxel`], grown a scan
+    /// at a time.
     refine_merge: VoxelMerge,
-    /// The points the refinement aligns to (`refine_merge`'s voxel centroids).
-    pub(super) refine_map: PointCloud,
+    /// The points the refinement aligns to (`refine_merge`'s voxel centroids), made when a
+    /// registration first needs them after the map changed ([`State::refine_points`]).
+    refine_map: OnceLock<PointCloud>,
     /// `refine_map` prepared for ICP, made when a registration first needs it after the
     /// map changed.
     pub(super) refine_prepared: OnceLock<IcpTarget>,
@@ -84,11 +85,17 @@ impl<'a> State<'a> {
             team,
             target: SearchTarget::from_scans(&[], res, levels)?,
             refine_merge,
-            refine_map: PointCloud::new(),
+            refine_map: OnceLock::new(),
             refine_prepared: OnceLock::new(),
             registrations: AtomicUsize::new(0),
             map_box: None,
         })
+    }
+
+    /// The points the refinement aligns to: the placed scans merged at
+    /// [`MapParams::refine_map_voxel`].
+    pub(super) fn refine_points(&self) -> &PointCloud {
+        self.refine_map.get_or_init(|| self.refine_merge.cloud())
     }
 
     /// The cloud scan `s` registers with: its points cut to [`MapParams::register_band`]
@@ -243,7 +250,7 @@ impl<'a> State<'a> {
         let levels = self.target.pyramid().levels();
         self.target = SearchTarget::from_scans(&[], res, levels)?;
         self.refine_merge = VoxelMerge::new(self.params.refine_map_voxel)?;
-        self.refine_map = PointCloud::new();
+        self.refine_map = OnceLock::new();
         self.refine_prepared = OnceLock::new();
         self.map_box = None;
         self.poses.iter_mut().for_each(|p| *p = None);
@@ -264,7 +271,7 @@ impl<'a> State<'a> {
         self.target.add_scan(cloud, &pose)?;
         // ICP refines against the whole scans (the floor fixes the height a band leaves free).
         self.refine_merge.add(&self.scans[s].cloud, &pose)?;
-        self.refine_map = self.refine_merge.cloud();
+        self.refine_map = OnceLock::new();
         self.refine_prepared = OnceLock::new();
         self.poses[s] = Some(pose);
         Ok(())
@@ -300,7 +307,7 @@ mod tests {
             team: Cow::Borrowed(&team),
             target: SearchTarget::from_scans(&[], 0.1, 1).unwrap(),
             refine_merge: VoxelMerge::new(0.05).unwrap(),
-            refine_map: PointCloud::new(),
+            refine_map: OnceLock::new(),
             refine_prepared: OnceLock::new(),
             poses: vec![None; scans.len()],
             registrations: AtomicUsize::new(0),
