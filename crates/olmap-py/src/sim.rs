@@ -152,12 +152,14 @@ fn choice<T: Copy>(what: &str, value: &str, options: &[(&str, T)]) -> PyResult<T
 /// Args:
 ///     world: ``"office"``, ``"lab"`` (default: a furnished 20 x 20 x 3 m room),
 ///         ``"corridor"``, ``"box-room"``, ``"twin-rooms"``, ``"desk-hall"``,
-///         ``"symmetric-hall"``.
+///         ``"symmetric-hall"``, ``"corridor-ring"`` (a 72 m corridor loop the robots drive
+///         round).
 ///     robots: number of robots (default 4).
 ///     scans_per_robot: stops (3D scans) per robot (default 20).
 ///     seed: seed of everything random (default 1).
-///     odometry: odometry error: ``"none"``, ``"typical"`` (default) or ``"degraded"``
-///         (about 0.5 m and 10 degrees per move, thesis §6.5).
+///     odometry: odometry error: ``"none"``, ``"typical"`` (default), ``"degraded"``
+///         (about 0.5 m and 10 degrees per move, thesis §6.5) or ``"drifting"`` (5 % scale
+///         and 2 degrees per metre of drift, 7.5 cm and 3 degrees per move).
 ///     scanner: ``"mirror"`` (default: the thesis' enhanced rotating-mirror scanner),
 ///         ``"mirror-standard"`` or ``"lidar"`` (a multi-beam spinning lidar).
 ///     range_noise: standard deviation of the range noise, metres (default 0.02).
@@ -206,10 +208,11 @@ pub fn simulate(
         Scanner3d::Mirror(m) => m.noise.sigma = range_noise,
         Scanner3d::Lidar(l) => l.noise.sigma = range_noise,
     }
-    let noises: [Named<OdometryNoise>; 3] = [
+    let noises: [Named<OdometryNoise>; 4] = [
         ("none", OdometryNoise::none),
         ("typical", OdometryNoise::typical),
         ("degraded", OdometryNoise::degraded),
+        ("drifting", OdometryNoise::drifting),
     ];
     let odometry = choice("odometry", odometry, &noises)?();
     let mut config = SimConfig {

@@ -95,15 +95,17 @@ pub struct MapArgs {
     /// turned. `0,0` maps from the corrected poses themselves.
     #[arg(long, value_name = "FRAC,DEG", default_value = "0.05,2")]
     pub odometry_noise: String,
-    /// 2D logs: the seed of the odometry noise.
+    /// 2D logs: the seed of the odometry noise (and, for 2D logs and 3D scans, of
+    /// --inject-wrong-closures).
     #[arg(long, default_value_t = 1)]
     pub noise_seed: u64,
     /// 2D logs: no loop closure (odometry and sequential registration only; shows what the
     /// pose graph's closures buy).
     #[arg(long)]
     pub no_loop_closure: bool,
-    /// 2D logs, robustness test: before the final solve, add this fraction of the accepted
-    /// loop closures again as wrong ones (2-5 m off, between random scans); the report
+    /// Robustness test: before the final solve, add this fraction of the accepted loop
+    /// closures (2D logs) or pairwise registrations (3D scans, with --graph) again as wrong
+    /// closures (2-5 m off, between random scans, drawn from --noise-seed); the report
     /// says which the robust kernel rejected. 0 (default) = none.
     #[arg(long, default_value_t = 0.0, value_name = "FRACTION")]
     pub inject_wrong_closures: f64,
@@ -170,7 +172,11 @@ fn map_params(a: &MapArgs) -> anyhow::Result<MapParams> {
             }
             None => None,
         },
-        graph: (a.graph || a.graph_out.is_some()).then(GraphRefineParams::default),
+        graph: (a.graph || a.graph_out.is_some()).then(|| GraphRefineParams {
+            inject_wrong_closures: a.inject_wrong_closures,
+            inject_seed: a.noise_seed,
+            ..Default::default()
+        }),
         ..Default::default()
     })
 }
@@ -183,14 +189,16 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
             return run_log(a, log);
         }
     }
-    if a.picture.is_some()
-        || a.no_loop_closure
-        || a.max_scans.is_some()
-        || a.inject_wrong_closures != 0.0
-    {
+    if a.picture.is_some() || a.no_loop_closure || a.max_scans.is_some() {
         bail!(
-            "--picture, --no-loop-closure, --max-scans and --inject-wrong-closures are for 2D \
-             logs (one CARMEN .log/.log.gz), so far"
+            "--picture, --no-loop-closure and --max-scans are for 2D logs (one CARMEN \
+             .log/.log.gz), so far"
+        );
+    }
+    if a.inject_wrong_closures != 0.0 && !(a.graph || a.graph_out.is_some()) {
+        bail!(
+            "--inject-wrong-closures tests the pose graph: for 3D scans it needs --graph (or \
+             --graph-out)"
         );
     }
     let Some(output) = &a.output else {
@@ -331,8 +339,39 @@ fn print_run(
         for r in &built.rejected {
             println!("  {:<20} REJECTED: {}", r.name, r.reasons.join("; "));
         }
+        if let Some(g) = &report.graph {
+            println!(
+                "  pose graph: edges {:?}, cost {:.4} -> {:.4}, largest move {:.3} m, {} \
+                 edge(s) down-weighted",
+                g.edges,
+                g.initial_cost,
+                g.final_cost,
+                g.largest_move_m,
+                g.down_weighted.len()
+            );
+            print_injected(&g.injected);
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The text lines of `--inject-wrong-closures`: how many the kernel caught, and each it
+/// did not.
+fn print_injected(injected: &[olmap::mapping::planar::InjectedClosure]) {
+    if injected.is_empty() {
+        return;
+    }
+    let caught = injected.iter().filter(|c| c.down_weighted).count();
+    println!(
+        "  injected wrong closures: {caught} of {} down-weighted by the kernel",
+        injected.len()
+    );
+    for c in injected.iter().filter(|c| !c.down_weighted) {
+        println!(
+            "    NOT caught: {} -> {} ({:.2} m off)",
+            c.from, c.to, c.offset_m
+        );
+    }
 }
 
 /// `olmap map LOG.log.gz`: a 2D log mapped in x-y-yaw with
@@ -409,24 +448,7 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
             report.closures_down_weighted.len()
         );
     }
-    if !report.injected_closures.is_empty() {
-        let caught = report
-            .injected_closures
-            .iter()
-            .filter(|c| c.down_weighted)
-            .count();
-        println!(
-            "  injected wrong closures: {} of {} down-weighted by the kernel",
-            caught,
-            report.injected_closures.len()
-        );
-        for c in report.injected_closures.iter().filter(|c| !c.down_weighted) {
-            println!(
-                "    NOT caught: {} -> {} ({:.2} m off)",
-                c.from, c.to, c.offset_m
-            );
-        }
-    }
+    print_injected(&report.injected_closures);
     println!(
         "  final solve: cost {:.4} -> {:.4}",
         report.initial_cost + 0.0,

@@ -30,6 +30,9 @@ pub enum WorldArg {
     DeskHall,
     /// A 16 x 10 m hall symmetric under a half turn (every view has a twin).
     SymmetricHall,
+    /// A corridor loop round a solid core (26 x 16 m outside, 3 m wide, a 72 m centre
+    /// line); robots drive round it instead of wandering, so long runs close a loop.
+    CorridorRing,
 }
 
 /// The 3D scanners.
@@ -52,6 +55,9 @@ pub enum OdometryArg {
     Typical,
     /// The thesis' degraded odometry: about 0.5 m and 10° per motion (§6.5.1).
     Degraded,
+    /// Strong drift, fair locally: 5 % scale, 2°/m heading drift, 7.5 cm and 3° per stop
+    /// (a 72 m loop ends metres off).
+    Drifting,
 }
 
 /// Where beacons are mounted.
@@ -121,6 +127,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         WorldArg::TwinRooms => WorldKind::TwinRooms,
         WorldArg::DeskHall => WorldKind::DeskHall,
         WorldArg::SymmetricHall => WorldKind::SymmetricHall,
+        WorldArg::CorridorRing => WorldKind::CorridorRing,
     };
     let mut scanner = match a.scanner {
         ScannerArg::Mirror => Scanner3d::Mirror(MirrorScanner::enhanced()),
@@ -145,6 +152,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
             OdometryArg::None => OdometryNoise::none(),
             OdometryArg::Typical => OdometryNoise::typical(),
             OdometryArg::Degraded => OdometryNoise::degraded(),
+            OdometryArg::Drifting => OdometryNoise::drifting(),
         },
         ..Default::default()
     };

@@ -25,7 +25,8 @@ pub use files::{check_dataset_output, read_dataset, write_dataset, DatasetOnDisk
 pub use report::SimulateReport;
 pub use rng::{mix64, SimRng};
 pub use robot::{
-    odometry_for, plan_trajectories, BeaconMount, MotionModel, OdometryNoise, RobotModel,
+    follow_route, odometry_for, plan_trajectories, BeaconMount, MotionModel, OdometryNoise,
+    RobotModel,
 };
 pub use scanners::{
     MirrorScanner, PlanarScanner, RangeNoise, SpinningLidar, RETRO_INTENSITY, RETRO_MAX_INCIDENCE,
@@ -37,6 +38,6 @@ pub use trust_suite::{
 };
 pub use world::{room_shell, World};
 pub use worlds::{
-    box_room, corridor, desk_hall, floor_only, free_spot, lab, office, symmetric_hall, twin_rooms,
-    two_walls, WorldKind,
+    box_room, corridor, corridor_ring, desk_hall, floor_only, free_spot, lab, office,
+    symmetric_hall, twin_rooms, two_walls, WorldKind,
 };

@@ -30,6 +30,9 @@ pub struct World {
     nodes: Vec<Node>,
     /// Object indices in leaf order.
     order: Vec<u32>,
+    /// A closed tour through the world's free space (x, y corners; the last joins the
+    /// first), empty for worlds robots roam at random.
+    route: Vec<(f64, f64)>,
 }
 
 #[derive(Debug, Clone)]
@@ -61,6 +64,7 @@ impl World {
             unbounded,
             nodes: Vec::new(),
             order: Vec::new(),
+            route: Vec::new(),
         };
         if !bounded.is_empty() {
             w.nodes.push(Node {
@@ -127,6 +131,19 @@ impl World {
         let (a, b) = items.split_at_mut(mid);
         self.build(left, a);
         self.build(left + 1, b);
+    }
+
+    /// The world with a closed route robots drive round (x, y corners in metres, the
+    /// last joined to the first) instead of a random walk: see
+    /// [`crate::sim::plan_trajectories`].
+    pub fn with_route(mut self, corners: Vec<(f64, f64)>) -> World {
+        self.route = corners;
+        self
+    }
+
+    /// The closed route robots drive round (empty: they roam at random).
+    pub fn route(&self) -> &[(f64, f64)] {
+        &self.route
     }
 
     /// The world's name.

@@ -159,6 +159,71 @@ fn trajectories_keep_clear_and_odometry_errors_have_the_configured_spread() {
     assert!((syaw / noise.sigma_yaw - 1.0).abs() < 0.05, "{syaw}");
 }
 
+/// A world with a route is driven round it: in the corridor ring (a 23 x 13 m centre
+/// line, 72 m) each stop keeps the robot's clearance, lies within the jitter (2 σ = 0.2 m)
+/// of the centre line, is one step (1-2 m along the route; the straight line is shorter
+/// only round a corner) from the last, and 52 stops go round once and past the start;
+/// a second robot starts half way round.
+#[test]
+fn robots_drive_round_a_route_and_close_the_loop() {
+    let world = WorldKind::CorridorRing.build(2);
+    let route = world.route().to_vec();
+    let perimeter: f64 = (0..route.len())
+        .map(|i| {
+            let (a, b) = (route[i], route[(i + 1) % route.len()]);
+            ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt()
+        })
+        .sum();
+    assert!((perimeter - 72.0).abs() < 1e-9, "{perimeter}");
+    let (model, motion) = (RobotModel::default(), MotionModel::default());
+    let paths = plan_trajectories(
+        &world,
+        &model,
+        &motion,
+        2,
+        52,
+        &mut SimRng::new(9),
+        olmap::sim::free_spot,
+    )
+    .expect("the route is clear");
+    // Distance from the centre line: the ring's centre line is the rectangle
+    // [1.5, 24.5] x [1.5, 14.5].
+    let off_centre = |x: f64, y: f64| {
+        let outside_x = (1.5 - x).max(x - 24.5).max(0.0);
+        let outside_y = (1.5 - y).max(y - 14.5).max(0.0);
+        if outside_x > 0.0 || outside_y > 0.0 {
+            outside_x.hypot(outside_y)
+        } else {
+            let dx = (x - 1.5).abs().min((x - 24.5).abs());
+            let dy = (y - 1.5).abs().min((y - 14.5).abs());
+            dx.min(dy)
+        }
+    };
+    for path in &paths {
+        assert_eq!(path.len(), 52);
+        for p in path {
+            let t = p.translation();
+            assert!(world.is_clear(t.x, t.y, model.body_radius + motion.margin, 0.05, 1.0));
+            assert!(off_centre(t.x, t.y) <= 0.2 + 1e-9, "{t:?}");
+        }
+        for w in path.windows(2) {
+            let d = (w[1].translation() - w[0].translation()).norm();
+            assert!((0.25..=motion.step.1 + 0.41).contains(&d), "step {d}");
+        }
+    }
+    let start = paths[0][0].translation();
+    let back = paths[0][40..]
+        .iter()
+        .map(|p| (p.translation() - start).norm())
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        back <= 2.0,
+        "the loop does not come back to the start: {back} m"
+    );
+    let second = (paths[1][0].translation() - start).norm();
+    assert!(second >= 10.0, "robot 1 starts {second} m from robot 0");
+}
+
 fn small_config(seed: u64) -> SimConfig {
     let lidar = SpinningLidar {
         beams: 16,

@@ -47,8 +47,9 @@ pub struct PlanarLogJob {
     pub inject_wrong_closures: f64,
 }
 
-/// A wrong loop closure injected by [`PlanarLogJob::inject_wrong_closures`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// A wrong loop closure injected by [`PlanarLogJob::inject_wrong_closures`] (or, in 3D,
+/// by [`crate::mapping::posegraph::GraphRefineParams::inject_wrong_closures`]).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct InjectedClosure {
     /// The earlier scan.
     pub from: String,

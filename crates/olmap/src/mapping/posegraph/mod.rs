@@ -15,6 +15,7 @@
 //! [`build_map`]: super::build_map
 //! [`build_map_linked`]: super::build_map_linked
 
+mod inject;
 mod pairs;
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -23,6 +24,7 @@ use std::time::Instant;
 use nalgebra::Matrix6;
 use serde::{Deserialize, Serialize};
 
+use super::planar::InjectedClosure;
 use super::{PlacedScan, ScanInput, ScanLink, TeamLinks};
 use crate::align::icp::IcpParams;
 use crate::error::{Error, Result};
@@ -67,6 +69,15 @@ pub struct GraphRefineParams {
     pub kernel: Kernel,
     /// The solve.
     pub solve: SolveParams,
+    /// Robustness test: after the pairwise edges, add this fraction of them again as
+    /// *wrong* loop closures (between placed scans at least [`LOOP_GAP`] apart, each the
+    /// pair's relative pose moved 2-5 m sideways, with the median pairwise edge's
+    /// information and [`GraphRefineParams::kernel`]) before the solve;
+    /// [`GraphRefineReport::injected`] says which the kernel down-weighted. Default 0
+    /// (none); at most 1.
+    pub inject_wrong_closures: f64,
+    /// Seed of the injected closures' pairs and offsets (default 0).
+    pub inject_seed: u64,
 }
 
 /// The σ of an odometry edge between two scans `d` metres apart:
@@ -178,6 +189,8 @@ impl Default for GraphRefineParams {
             sighting_sigma: Some(SightingSigma::default()),
             kernel: Kernel::Dcs(10.0),
             solve: SolveParams::default(),
+            inject_wrong_closures: 0.0,
+            inject_seed: 0,
         }
     }
 }
@@ -214,6 +227,12 @@ impl GraphRefineParams {
             return bad(format!(
                 "sigma_floor and information_scale must be > 0, got {} and {}",
                 self.sigma_floor, self.information_scale
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.inject_wrong_closures) {
+            return bad(format!(
+                "the fraction of wrong closures to inject must be in [0, 1], got {}",
+                self.inject_wrong_closures
             ));
         }
         if let Some(o) = self.odometry_sigma {
@@ -272,6 +291,10 @@ pub struct GraphRefineReport {
     pub largest_move_m: f64,
     /// Wall time (registrations and solve), seconds.
     pub seconds: f64,
+    /// The wrong closures [`GraphRefineParams::inject_wrong_closures`] added, each with
+    /// whether the kernel down-weighted it (empty without injection).
+    #[serde(default)]
+    pub injected: Vec<InjectedClosure>,
 }
 
 /// The result of [`refine_placed`].
@@ -362,6 +385,7 @@ pub fn refine_placed(
         iterations: 0,
         largest_move_m: 0.0,
         seconds: 0.0,
+        injected: Vec::new(),
     };
     if let Some(sigma) = params.odometry_sigma {
         add_odometry_edges(&mut graph, scans, frames, placed, sigma)?;
@@ -370,7 +394,20 @@ pub fn refine_placed(
         add_sighting_edges(&mut graph, team, placed, sigma, params.kernel)?;
     }
     pairs::add_registration_edges(&mut graph, scans, frames, placed, params, &mut report)?;
+    let injected = inject::inject_wrong_closures(&mut graph, placed, params)?;
     let solved = graph.optimise(&params.solve)?;
+    report.injected = injected
+        .into_iter()
+        .map(|w| InjectedClosure {
+            from: scans[w.from].name.clone(),
+            to: scans[w.to].name.clone(),
+            offset_m: w.offset_m,
+            down_weighted: solved
+                .edge_reports
+                .get(w.edge)
+                .is_some_and(|e| e.down_weighted),
+        })
+        .collect();
     report.initial_cost = solved.initial_cost;
     report.final_cost = solved.final_cost;
     report.iterations = solved.iterations;

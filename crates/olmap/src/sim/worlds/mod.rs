@@ -1,7 +1,7 @@
 //! Built-in indoor worlds: an empty box room, a furnished lab (thesis §6.5), an office floor
 //! with a stairwell shaft, a featureless corridor, and worlds built to break a verdict
 //! ([`traps`]: identical rooms, rows of identical desks, a symmetric hall, a bare floor, two
-//! walls). Every generator is deterministic in
+//! walls), and a [`corridor_ring`] robots drive round (a 72 m loop). Every generator is deterministic in
 //! its seed (through [`SimRng`]), so a dataset is reproducible from its world name and seed.
 //!
 //! Static objects all carry id 0; structure (floors, walls, ceilings, pillars, stairs) uses
@@ -17,8 +17,10 @@ use super::rng::SimRng;
 use super::shape::{Material, Object, Shape};
 use super::world::{room_shell, World};
 
+mod ring;
 mod traps;
 
+pub use ring::corridor_ring;
 pub use traps::{desk_hall, floor_only, symmetric_hall, twin_rooms, two_walls};
 
 /// Height band a ground robot occupies: what [`free_spot`] keeps clear of.
@@ -54,11 +56,13 @@ pub enum WorldKind {
     DeskHall,
     /// [`symmetric_hall`]: a hall symmetric under a half turn.
     SymmetricHall,
+    /// [`corridor_ring`]: a 72 m corridor loop with its route.
+    CorridorRing,
 }
 
 impl WorldKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [WorldKind; 7] = [
+    pub const ALL: [WorldKind; 8] = [
         WorldKind::Office,
         WorldKind::Lab,
         WorldKind::Corridor,
@@ -66,10 +70,11 @@ impl WorldKind {
         WorldKind::TwinRooms,
         WorldKind::DeskHall,
         WorldKind::SymmetricHall,
+        WorldKind::CorridorRing,
     ];
 
     /// The lower-case name ("office", "lab", "corridor", "box-room", "twin-rooms",
-    /// "desk-hall", "symmetric-hall").
+    /// "desk-hall", "symmetric-hall", "corridor-ring").
     pub fn name(self) -> &'static str {
         match self {
             WorldKind::Office => "office",
@@ -79,6 +84,7 @@ impl WorldKind {
             WorldKind::TwinRooms => "twin-rooms",
             WorldKind::DeskHall => "desk-hall",
             WorldKind::SymmetricHall => "symmetric-hall",
+            WorldKind::CorridorRing => "corridor-ring",
         }
     }
 
@@ -92,6 +98,7 @@ impl WorldKind {
             WorldKind::TwinRooms => twin_rooms(seed),
             WorldKind::DeskHall => desk_hall(seed),
             WorldKind::SymmetricHall => symmetric_hall(seed),
+            WorldKind::CorridorRing => corridor_ring(seed),
         }
     }
 }
