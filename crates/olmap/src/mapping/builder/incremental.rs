@@ -120,7 +120,9 @@ impl IncrementalMapper {
     /// Places it when its registration is trusted; the first scan given defines the map
     /// frame. A scan with an odometry prediction or a link is never searched globally (a
     /// look-alike place can win a global search); one with neither is, unless its robot
-    /// waits for a sighting.
+    /// waits for a sighting. Nor is one whose odometry path back to the nearest placed
+    /// scan of its robot is over 8 m (with the default windows) searched in a window that
+    /// wide: it waits for a nearer scan to be placed.
     ///
     /// Once this returns `Ok`, the mapper holds the scan (placed or waiting; a registration
     /// that fails, e.g. on coordinates past the map's key range, leaves it waiting with the
@@ -214,6 +216,18 @@ impl IncrementalMapper {
             self.placing.last_doubts[s] =
                 Some(vec!["odometry puts it outside the map so far".to_string()]);
             return Ok(false);
+        }
+        // Nor does it search a window as wide as a long odometry path's tolerance: without
+        // a global search to compare with, a look-alike in that window would be trusted.
+        // It waits for a scan nearer in capture order to be placed (or for a link).
+        if state.placed_links(s).is_empty() {
+            if let Some(path) = state.long_prediction(s) {
+                self.placing.last_doubts[s] = Some(vec![format!(
+                    "its odometry reaches back {path:.1} m to the nearest placed scan of its \
+                     robot: too far to search without look-alikes; it waits for a nearer one"
+                )]);
+                return Ok(false);
+            }
         }
         let global = state.predict(s).is_none() && state.placed_links(s).is_empty();
         let placed = try_place(state, &mut self.placing, s, global)?;
