@@ -29,6 +29,30 @@ def test_simulate_is_seeded_and_has_truth(small):
         small.scans(5)
 
 
+def test_the_corridor_ring_is_driven_round_its_centre_line_with_drifting_odometry():
+    # The ring's centre line is the 23 x 13 m rectangle with its corner at (1.5, 1.5);
+    # robots keep within the route's jitter of it (clamped to 0.2 m).
+    data = olmap.simulate(world="corridor-ring", robots=2, scans_per_robot=4, seed=2,
+                          odometry="drifting", scanner="lidar")
+    assert data.world == "corridor-ring"
+
+    def off_centre(x, y):
+        out_x, out_y = max(1.5 - x, x - 24.5, 0.0), max(1.5 - y, y - 14.5, 0.0)
+        if out_x > 0 or out_y > 0:
+            return math.hypot(out_x, out_y)
+        return min(abs(x - 1.5), abs(x - 24.5), abs(y - 1.5), abs(y - 14.5))
+
+    for r in range(2):
+        truth = data.truth(r)
+        assert all(off_centre(t[0, 3], t[1, 3]) <= 0.2 + 1e-9 for t in truth)
+        # Drifting odometry (5 % scale, 2 degrees per metre, 7.5 cm per move) is not the
+        # truth after 3 moves of 1-2 m.
+        moved = np.linalg.inv(truth[0]) @ truth[3]
+        assert np.linalg.norm(moved[:3, 3] - data.odometry(r)[3][:3, 3]) > 1e-3
+    with pytest.raises(ValueError, match="drifting"):
+        olmap.simulate(world="corridor-ring", robots=1, scans_per_robot=1, odometry="wobbly")
+
+
 def test_map_team_equals_the_cli_and_the_truth(small, cli, tmp_path):
     ds_dir = tmp_path / "dataset"
     small.write(ds_dir)

@@ -15,6 +15,22 @@ fn lab(seed: u64, robots: usize, stops: usize, odometry: OdometryNoise) -> SimDa
     crate::sim_lab(seed, robots, stops, odometry)
 }
 
+/// One robot driving `stops` stops round the corridor ring of `seed`.
+fn ring(seed: u64, stops: usize, odometry: OdometryNoise) -> SimDataset {
+    olmap::sim::simulate(
+        &olmap::sim::SimConfig {
+            world: olmap::sim::WorldKind::CorridorRing,
+            seed,
+            robots: 1,
+            stops,
+            odometry,
+            ..Default::default()
+        },
+        |_, _| {},
+    )
+    .unwrap()
+}
+
 /// An incremental mapper with the team mapper's parameters, robots joining only through
 /// sightings.
 fn team_mapper() -> IncrementalMapper {
@@ -354,18 +370,7 @@ fn a_refused_first_scan_leaves_nothing_behind() {
 #[test]
 fn a_72_m_corridor_loop_with_drifting_odometry_closes_within_a_decimetre() {
     let stops = 52;
-    let data = olmap::sim::simulate(
-        &olmap::sim::SimConfig {
-            world: olmap::sim::WorldKind::CorridorRing,
-            seed: 1,
-            robots: 1,
-            stops,
-            odometry: OdometryNoise::drifting(),
-            ..Default::default()
-        },
-        |_, _| {},
-    )
-    .unwrap();
+    let data = ring(1, stops, OdometryNoise::drifting());
     let robot = &data.robots[0];
     let truth = |i: usize| robot.truth[0].inverse() * robot.truth[i];
     // The loop is real: the last stops see the first again, and odometry alone is lost.
@@ -429,18 +434,7 @@ fn a_72_m_corridor_loop_with_drifting_odometry_closes_within_a_decimetre() {
 #[test]
 fn a_scan_whose_odometry_reaches_back_too_far_waits_instead_of_matching_a_look_alike() {
     let stops = 46;
-    let data = olmap::sim::simulate(
-        &olmap::sim::SimConfig {
-            world: olmap::sim::WorldKind::CorridorRing,
-            seed: 2,
-            robots: 1,
-            stops,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        },
-        |_, _| {},
-    )
-    .unwrap();
+    let data = ring(2, stops, OdometryNoise::degraded());
     let robot = &data.robots[0];
     let truth = |i: usize| robot.truth[0].inverse() * robot.truth[i];
     let params = MapParams {
