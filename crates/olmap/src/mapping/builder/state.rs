@@ -235,18 +235,6 @@ impl<'a> State<'a> {
             .then_some(distance)
     }
 
-    /// The distance odometry says scan `s` lies from the placed scan it is predicted from,
-    /// when it is over 8 m (with the default 0.5 m first window: the path length that
-    /// makes [`State::long_prediction`]): too far for a window search in a building whose
-    /// stretches look alike. Unlike the path length, it does not grow when the input
-    /// interleaves robots or places (capture order is input order there).
-    pub(super) fn long_jump(&self, s: usize) -> Option<f64> {
-        let (prior, _) = self.predict(s)?;
-        let from = self.poses[self.predicts_from(s)?]?;
-        let jump = (prior.translation() - from.translation()).norm();
-        (0.25 * jump > 4.0 * self.params.odometry_window.0).then_some(jump)
-    }
-
     /// Whether odometry puts scan `s` clearly outside the map so far (its predicted
     /// footprint, widened by every window and tolerance, misses the map's box): no search
     /// can succeed yet, so the batch mapper does not spend one.
