@@ -154,18 +154,14 @@ impl Batch<'_, '_> {
             .map(|(s, _)| s)
     }
 
-    /// Registers the scans `list` (except those odometry puts outside the map, or whose
-    /// odometry reaches back more than 8 m to a placed scan and no placed sighting ties:
-    /// [`State::long_prediction`]; both wait for the last resort unless the map grows to
-    /// them) and caches the results. The registrations are independent (each reads the map
-    /// as it is), so they run in parallel; the results, and which error is returned, do not
-    /// depend on the number of threads.
+    /// Registers the scans `list` (except those odometry puts outside the map) and caches
+    /// the results. The registrations are independent (each reads the map as it is), so
+    /// they run in parallel; the results, and which error is returned, do not depend on the
+    /// number of threads.
     fn try_scans(&mut self, list: &[usize], placed_now: usize) -> Result<()> {
         let mut search = Vec::with_capacity(list.len());
         for &s in list {
-            let far = self.state.far_from_map(s)
-                || (self.state.placed_links(s).is_empty()
-                    && self.state.long_prediction(s).is_some());
+            let far = self.state.far_from_map(s);
             self.pending[s].far = far;
             self.pending[s].attempted_at = placed_now;
             if !far {
