@@ -8,7 +8,7 @@ use olmap::mapping::{
     build_map, evaluate, IncrementalMapper, MapMode, MapParams, Placement, ScanInput, ScanLink,
     ScanOutcome,
 };
-use olmap::sim::{OdometryNoise, SimDataset};
+use olmap::sim::{OdometryNoise, SimDataset, SimRobot};
 use olmap::team::{map_team, LiveTeam, TeamParams};
 
 fn lab(seed: u64, robots: usize, stops: usize, odometry: OdometryNoise) -> SimDataset {
@@ -29,6 +29,21 @@ fn ring(seed: u64, stops: usize, odometry: OdometryNoise) -> SimDataset {
         |_, _| {},
     )
     .unwrap()
+}
+
+/// Every scan `build` placed is within `metres` of `robot`'s truth (in its first scan's
+/// frame).
+fn assert_placed_within(build: &olmap::mapping::MapBuild, robot: &SimRobot, metres: f64) {
+    for p in &build.placed {
+        let truth = robot.truth[0].inverse() * robot.truth[p.index];
+        let e = PoseError::between(&p.pose, &truth);
+        assert!(
+            e.translation_m <= metres,
+            "{} is {:.3} m off",
+            p.name,
+            e.translation_m
+        );
+    }
 }
 
 /// An incremental mapper with the team mapper's parameters, robots joining only through
@@ -394,15 +409,7 @@ fn a_72_m_corridor_loop_with_drifting_odometry_closes_within_a_decimetre() {
     };
     let build = build_map(&robot.scan_inputs(), &params, |_, _| {}).unwrap();
     assert_eq!(build.placed.len(), stops, "waiting: {:?}", build.rejected);
-    for p in &build.placed {
-        let e = PoseError::between(&p.pose, &truth(p.index));
-        assert!(
-            e.translation_m <= 0.10,
-            "{} is {:.3} m off",
-            p.name,
-            e.translation_m
-        );
-    }
+    assert_placed_within(&build, robot, 0.10);
     let report = &build.graph.as_ref().expect("the graph ran").report;
     assert!(
         report.edges.get("loop_closure").copied().unwrap_or(0) > report.injected.len(),
@@ -436,22 +443,13 @@ fn a_scan_whose_odometry_reaches_back_too_far_waits_instead_of_matching_a_look_a
     let stops = 46;
     let data = ring(2, stops, OdometryNoise::degraded());
     let robot = &data.robots[0];
-    let truth = |i: usize| robot.truth[0].inverse() * robot.truth[i];
     let params = MapParams {
         mode: MapMode::Incremental,
         ..Default::default()
     };
     let build = build_map(&robot.scan_inputs(), &params, |_, _| {}).unwrap();
     assert!(build.placed.len() >= 10, "{} placed", build.placed.len());
-    for p in &build.placed {
-        let e = PoseError::between(&p.pose, &truth(p.index));
-        assert!(
-            e.translation_m <= 0.3,
-            "{} is {:.3} m off",
-            p.name,
-            e.translation_m
-        );
-    }
+    assert_placed_within(&build, robot, 0.3);
     assert!(
         build
             .rejected

@@ -212,7 +212,8 @@ impl IncrementalMapper {
         }
         // A scan with a placed sighting is searched along it even when its odometry says
         // it lies outside the map (degraded odometry can say so wrongly).
-        if state.placed_links(s).is_empty() && state.far_from_map(s) {
+        let linked = !state.placed_links(s).is_empty();
+        if !linked && state.far_from_map(s) {
             self.placing.last_doubts[s] =
                 Some(vec!["odometry puts it outside the map so far".to_string()]);
             return Ok(false);
@@ -220,16 +221,14 @@ impl IncrementalMapper {
         // Nor does it search a window as wide as a long odometry path's tolerance: without
         // a global search to compare with, a look-alike in that window would be trusted.
         // It waits for a scan nearer in capture order to be placed (or for a link).
-        if state.placed_links(s).is_empty() {
-            if let Some(path) = state.long_prediction(s) {
-                self.placing.last_doubts[s] = Some(vec![format!(
-                    "its odometry reaches back {path:.1} m to the nearest placed scan of its \
-                     robot: too far to search without look-alikes; it waits for a nearer one"
-                )]);
-                return Ok(false);
-            }
+        if let Some(path) = (!linked).then(|| state.long_prediction(s)).flatten() {
+            self.placing.last_doubts[s] = Some(vec![format!(
+                "its odometry reaches back {path:.1} m to the nearest placed scan of its \
+                 robot: too far to search without look-alikes; it waits for a nearer one"
+            )]);
+            return Ok(false);
         }
-        let global = state.predict(s).is_none() && state.placed_links(s).is_empty();
+        let global = !linked && state.predict(s).is_none();
         let placed = try_place(state, &mut self.placing, s, global)?;
         if placed {
             self.attempted_at[s] = Some(self.placing.placed.len());
