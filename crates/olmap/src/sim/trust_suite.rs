@@ -1,6 +1,7 @@
 //! The trust suite: simulated scan pairs with ground truth, built to tempt a registration
 //! into a confident wrong answer (unrelated places, identical rooms, rows of identical
-//! desks, featureless corridors, symmetric halls, bare floors, two walls) beside pairs
+//! desks, featureless corridors, symmetric halls, bare floors, two walls, the two long sides
+//! of a furnished corridor ring) beside pairs
 //! that do have one right answer (the same place, partial views, half the points random
 //! outliers, low overlap, a small piece of a scan). [`trust_cases`] draws them; the
 //! benchmark `olmap bench --trust` registers every pair and tabulates, per kind, how often
@@ -21,7 +22,8 @@ use super::robot::RobotModel;
 use super::scanners::MirrorScanner;
 use super::world::World;
 use super::worlds::{
-    corridor, desk_hall, floor_only, free_spot, lab, office, symmetric_hall, twin_rooms, two_walls,
+    corridor, corridor_ring, desk_hall, floor_only, free_spot, lab, office, symmetric_hall,
+    twin_rooms, two_walls,
 };
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -64,6 +66,12 @@ pub enum TrustScene {
     Planar,
     /// Scans of two perpendicular walls and nothing else ([`super::two_walls`]).
     TwoWalls,
+    /// One scan from the middle of each long side of a corridor ring
+    /// ([`super::corridor_ring`]): two stretches of one corridor 13 m apart, a solid core
+    /// between them, so nothing is shared, but both are 3 m wide, 2.8 m high and lined
+    /// with the same kinds of things. The batch mapper once trusted one for the other
+    /// (issue 23's ring, thesis-degraded odometry). No right answer exists.
+    OppositeCorridors,
 }
 
 /// What a pair's answer can be, which decides how its verdict is judged.
@@ -85,7 +93,7 @@ pub enum Answer {
 
 impl TrustScene {
     /// Every kind, in table order.
-    pub const ALL: [TrustScene; 12] = [
+    pub const ALL: [TrustScene; 13] = [
         TrustScene::SamePlace,
         TrustScene::Partial,
         TrustScene::Outliers,
@@ -98,6 +106,7 @@ impl TrustScene {
         TrustScene::Corridor,
         TrustScene::Planar,
         TrustScene::TwoWalls,
+        TrustScene::OppositeCorridors,
     ];
 
     /// The kebab-case name.
@@ -115,6 +124,7 @@ impl TrustScene {
             TrustScene::Corridor => "corridor",
             TrustScene::Planar => "planar",
             TrustScene::TwoWalls => "two-walls",
+            TrustScene::OppositeCorridors => "opposite-corridors",
         }
     }
 
@@ -123,7 +133,7 @@ impl TrustScene {
         match self {
             TrustScene::SamePlace | TrustScene::Partial | TrustScene::Outliers => Answer::Unique,
             TrustScene::LowOverlap | TrustScene::Subset => Answer::Scarce,
-            TrustScene::Unrelated => Answer::None,
+            TrustScene::Unrelated | TrustScene::OppositeCorridors => Answer::None,
             _ => Answer::Ambiguous,
         }
     }
@@ -445,6 +455,37 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
                 robot_at(x + dx, 1.0 + rng.range(-0.3, 0.3), yaw_b),
                 seed,
             )
+        }
+        TrustScene::OppositeCorridors => {
+            // The ring's long corridors run along x (outer walls 0-26 m): the south one's
+            // centre line at y = 1.5 m, the north one's at 14.5 m. Their middles (x 9-17 m)
+            // see neither end within the scanner's 8 m.
+            let world = corridor_ring(seed);
+            let along = |y: f64, rng: &mut SimRng| {
+                let yaw = if rng.chance(0.5) {
+                    0.0
+                } else {
+                    std::f64::consts::PI
+                };
+                robot_at(
+                    rng.range(9.0, 17.0),
+                    y + rng.range(-0.3, 0.3),
+                    yaw + rng.range(-0.3, 0.3),
+                )
+            };
+            let (south, north) = (along(1.5, rng), along(14.5, rng));
+            let (at, from) = if rng.chance(0.5) {
+                (south, north)
+            } else {
+                (north, south)
+            };
+            Drawn {
+                target: rig.scan(&world, &at, seed, 0),
+                source: rig.scan(&world, &from, seed, 1),
+                truth: None,
+                world: Arc::new(world),
+                t_world_target: at,
+            }
         }
         TrustScene::Planar | TrustScene::TwoWalls => {
             let world = Arc::new(if scene == TrustScene::Planar {

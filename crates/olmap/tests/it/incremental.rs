@@ -1,6 +1,7 @@
 //! The incremental mapper (issue 23 item 1, 3D): scans placed one at a time as they
 //! arrive, waiting scans placed once a link or the map reaches them, the pose graph run on
-//! the live map; and the live team map built record by record.
+//! the live map; and the live team map built record by record. The batch mapper's test on
+//! the corridor ring sits here too, beside the incremental ones on the same world.
 
 use olmap::geometry::PoseError;
 use olmap::mapping::posegraph::GraphRefineParams;
