@@ -33,7 +33,7 @@ pub struct BenchArgs {
     /// each verdict judged against the truth (right within 0.3 m and 3°).
     #[arg(long)]
     pub trust: bool,
-    /// Trust suite: pairs per kind of scene (13 kinds; default 17, 221 pairs).
+    /// Trust suite: pairs per kind of scene (14 kinds; default 17, 238 pairs).
     #[arg(long, default_value_t = 17, requires = "trust")]
     pub pairs_per_scene: usize,
     /// Trust suite: the seed of the pairs (default 1).

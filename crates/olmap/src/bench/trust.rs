@@ -27,7 +27,7 @@ pub const TRUST_REPORT_VERSION: u32 = 1;
 pub struct TrustOptions {
     /// Seed of the suite.
     pub seed: u64,
-    /// Pairs per kind of scene (13 kinds).
+    /// Pairs per kind of scene (14 kinds).
     pub per_scene: usize,
     /// The registration under test.
     pub register: RegisterParams,

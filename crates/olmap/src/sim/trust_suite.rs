@@ -1,7 +1,7 @@
 //! The trust suite: simulated scan pairs with ground truth, built to tempt a registration
 //! into a confident wrong answer (unrelated places, identical rooms, rows of identical
 //! desks, featureless corridors, symmetric halls, bare floors, two walls, the two long sides
-//! of a furnished corridor ring) beside pairs
+//! of a furnished corridor ring, stretches of one of them) beside pairs
 //! that do have one right answer (the same place, partial views, half the points random
 //! outliers, low overlap, a small piece of a scan). [`trust_cases`] draws them; the
 //! benchmark `olmap bench --trust` registers every pair and tabulates, per kind, how often
@@ -72,6 +72,10 @@ pub enum TrustScene {
     /// with the same kinds of things. The batch mapper once trusted one for the other
     /// (issue 23's ring, thesis-degraded odometry). No right answer exists.
     OppositeCorridors,
+    /// Two scans 1-6 m apart along one long side of the corridor ring: a furnished
+    /// corridor, where a slide along it can fit nearly as well (the mappers once trusted
+    /// 0.4 m slides there).
+    RingCorridor,
 }
 
 /// What a pair's answer can be, which decides how its verdict is judged.
@@ -93,7 +97,7 @@ pub enum Answer {
 
 impl TrustScene {
     /// Every kind, in table order.
-    pub const ALL: [TrustScene; 13] = [
+    pub const ALL: [TrustScene; 14] = [
         TrustScene::SamePlace,
         TrustScene::Partial,
         TrustScene::Outliers,
@@ -107,6 +111,7 @@ impl TrustScene {
         TrustScene::Planar,
         TrustScene::TwoWalls,
         TrustScene::OppositeCorridors,
+        TrustScene::RingCorridor,
     ];
 
     /// The kebab-case name.
@@ -125,6 +130,7 @@ impl TrustScene {
             TrustScene::Planar => "planar",
             TrustScene::TwoWalls => "two-walls",
             TrustScene::OppositeCorridors => "opposite-corridors",
+            TrustScene::RingCorridor => "ring-corridor",
         }
     }
 
@@ -486,6 +492,30 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
                 world: Arc::new(world),
                 t_world_target: at,
             }
+        }
+        TrustScene::RingCorridor => {
+            // One long side of the ring (outer walls 0-26 m along x; centre lines at y = 1.5
+            // and 14.5 m), away from the corners.
+            let world = Arc::new(corridor_ring(seed));
+            let y = if rng.chance(0.5) { 1.5 } else { 14.5 };
+            let x = rng.range(5.0, 21.0);
+            let dx = rng.range(1.0, 6.0) * if rng.chance(0.5) { 1.0 } else { -1.0 };
+            let yaw = if rng.chance(0.5) {
+                0.0
+            } else {
+                std::f64::consts::PI
+            };
+            pair(
+                &rig,
+                &world,
+                robot_at(x, y + rng.range(-0.3, 0.3), yaw + rng.range(-0.3, 0.3)),
+                robot_at(
+                    (x + dx).clamp(3.5, 22.5),
+                    y + rng.range(-0.3, 0.3),
+                    yaw + rng.range(-0.3, 0.3),
+                ),
+                seed,
+            )
         }
         TrustScene::Planar | TrustScene::TwoWalls => {
             let world = Arc::new(if scene == TrustScene::Planar {
