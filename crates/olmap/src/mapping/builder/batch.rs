@@ -35,7 +35,7 @@ struct Pending {
     /// round).
     attempted_at: usize,
     /// Whether odometry places it outside the map so far, or reaches back so far that it
-    /// waits for a scan predicted over a shorter path ([`Batch::waits_for_shorter`]).
+    /// waits for a scan predicted over a shorter path ([`Batch::some_short`]).
     far: bool,
     /// Whether it was searched anyway once (the last resort).
     forced: bool,
@@ -161,8 +161,10 @@ impl Batch<'_, '_> {
     /// number of threads.
     fn try_scans(&mut self, list: &[usize], unplaced: &[usize], placed_now: usize) -> Result<()> {
         let mut search = Vec::with_capacity(list.len());
+        let mut some_short = None;
         for &s in list {
-            let far = self.state.far_from_map(s) || self.waits_for_shorter(s, unplaced);
+            let far = self.state.far_from_map(s)
+                || (self.long(s) && *some_short.get_or_insert_with(|| self.some_short(unplaced)));
             self.pending[s].far = far;
             self.pending[s].attempted_at = placed_now;
             if !far {
@@ -172,23 +174,26 @@ impl Batch<'_, '_> {
         self.attempt_all(&search, false)
     }
 
-    /// Whether scan `s` (with no placed sighting) is predicted by odometry over so long a
-    /// path ([`State::long_prediction`]) that its widest window would search a whole
-    /// stretch of building, while another unplaced scan is predicted over a short one: the
-    /// map first grows along the robots' paths toward it. In a corridor the wide window
-    /// finds a look-alike stretch: a simulated 72 m corridor ring with the thesis' degraded
-    /// odometry had the middle of one long side trusted in the middle of the other, 13 m
-    /// off, and 35 scans followed it. When every unplaced scan's path is long (input
-    /// order far from capture order, as in a hall given in interleaved order) nothing
-    /// waits, and the searches, verdict and rounds decide as before.
-    fn waits_for_shorter(&self, s: usize, unplaced: &[usize]) -> bool {
-        let state = &*self.state;
-        let long =
-            |t: usize| state.placed_links(t).is_empty() && state.long_prediction(t).is_some();
-        long(s)
-            && unplaced
-                .iter()
-                .any(|&t| t != s && state.predict(t).is_some() && !long(t))
+    /// Whether a scan with no placed sighting is predicted by odometry over so long a path
+    /// ([`State::long_prediction`]) that its widest window would search a whole stretch of
+    /// building.
+    fn long(&self, s: usize) -> bool {
+        self.state.placed_links(s).is_empty() && self.state.long_prediction(s).is_some()
+    }
+
+    /// Whether any scan of `unplaced` has an odometry prediction that is not
+    /// [`Batch::long`]: while one has, the long ones wait and the map first grows along the
+    /// robots' paths toward them. In a corridor the wide window finds a look-alike stretch:
+    /// a simulated 72 m corridor ring with the thesis' degraded odometry had the middle of
+    /// one long side trusted in the middle of the other, 13 m off, and 26 scans followed
+    /// it. When every unplaced scan's path is long (input order far from capture order, as
+    /// in a hall given in interleaved order) nothing waits, and the searches, verdict and
+    /// rounds decide as before. Asked once per round's list (each answer costs a
+    /// prediction per scan).
+    fn some_short(&self, unplaced: &[usize]) -> bool {
+        unplaced
+            .iter()
+            .any(|&t| self.state.predict(t).is_some() && !self.long(t))
     }
 
     /// [`attempt`] on every scan of `list` in parallel; each result replaces the scan's
