@@ -72,7 +72,8 @@ fn run_trust(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         per_scene: a.pairs_per_scene,
         ..Default::default()
     };
-    let bar = progress(12 * a.pairs_per_scene as u64, "trust suite", a.json);
+    let kinds = olmap::sim::TrustScene::ALL.len() as u64;
+    let bar = progress(kinds * a.pairs_per_scene as u64, "trust suite", a.json);
     let r = olmap::bench::run_trust(&options, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
     if a.json {
@@ -80,12 +81,12 @@ fn run_trust(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     println!(
-        "{:<16} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
+        "{:<18} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
         "scene", "answer", "pairs", "trusted", "alias", "WRONG", "untrusted", "right"
     );
     for s in &r.scenes {
         println!(
-            "{:<16} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
+            "{:<18} {:<10} {:>5} {:>8} {:>8} {:>8} {:>9} {:>6}",
             s.scene,
             s.answer,
             s.pairs,
