@@ -281,6 +281,15 @@ fn robot_at(x: f64, y: f64, yaw: f64) -> Pose {
     Pose::from_xyz_ypr(x, y, 0.0, yaw, 0.0, 0.0)
 }
 
+/// A heading along the x axis, either way (0 or π, one draw).
+fn along_x(rng: &mut SimRng) -> f64 {
+    if rng.chance(0.5) {
+        0.0
+    } else {
+        std::f64::consts::PI
+    }
+}
+
 fn random_yaw(rng: &mut SimRng) -> f64 {
     rng.range(-std::f64::consts::PI, std::f64::consts::PI)
 }
@@ -448,11 +457,7 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             let world = Arc::new(corridor(seed));
             let x = rng.range(8.0, 32.0);
             let dx = rng.range(1.0, 6.0) * if rng.chance(0.5) { 1.0 } else { -1.0 };
-            let yaw_a = if rng.chance(0.5) {
-                0.0
-            } else {
-                std::f64::consts::PI
-            };
+            let yaw_a = along_x(rng);
             let yaw_b = yaw_a + rng.range(-0.5, 0.5);
             pair(
                 &rig,
@@ -468,11 +473,7 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             // see neither end within the scanner's 8 m.
             let world = corridor_ring(seed);
             let along = |y: f64, rng: &mut SimRng| {
-                let yaw = if rng.chance(0.5) {
-                    0.0
-                } else {
-                    std::f64::consts::PI
-                };
+                let yaw = along_x(rng);
                 robot_at(
                     rng.range(9.0, 17.0),
                     y + rng.range(-0.3, 0.3),
@@ -500,11 +501,7 @@ fn draw(scene: TrustScene, seed: u64, rng: &mut SimRng) -> Result<TrustCase> {
             let y = if rng.chance(0.5) { 1.5 } else { 14.5 };
             let x = rng.range(5.0, 21.0);
             let dx = rng.range(1.0, 6.0) * if rng.chance(0.5) { 1.0 } else { -1.0 };
-            let yaw = if rng.chance(0.5) {
-                0.0
-            } else {
-                std::f64::consts::PI
-            };
+            let yaw = along_x(rng);
             pair(
                 &rig,
                 &world,
