@@ -347,6 +347,68 @@ pub fn consistency_seen(
     })
 }
 
+/// A cheap stand-in for the source side of [`consistency_seen`], for ranking many poses
+/// before any is refined: the centres of the source's surface voxels (its own frame), each
+/// moved by a pose and counted against the target's finest level alone — supported when an
+/// occupied target voxel lies within one cell, contradicted when it lies deep in the
+/// target's free space (no patch test, no range-dependent level). Its value at a pose,
+/// `supported − CONTRADICTION_WEIGHT · contradicted`, orders poses as the fit does without
+/// the cost of re-voxelising the scan at each.
+pub(super) struct QuickFit {
+    /// Surface voxel centres of the source, in the source frame.
+    centres: Vec<Point3<f64>>,
+}
+
+impl QuickFit {
+    /// The surface of `source` at `resolution`.
+    pub(super) fn new(source: &PointCloud, resolution: f64) -> Result<Self> {
+        let mut list = OccupancyList::new(resolution)?;
+        list.add_points(source, &Pose::identity(), 1);
+        let s = surface(&list);
+        let mut centres: Vec<Point3<f64>> = s.iter().map(|(k, _)| s.center(k)).collect();
+        // A fixed order: the value is a sum of integers either way, but the caller's
+        // centroid and extent are then the same bit for bit whatever the hash did.
+        centres.sort_by(|a, b| {
+            (a.x, a.y, a.z)
+                .partial_cmp(&(b.x, b.y, b.z))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        Ok(QuickFit { centres })
+    }
+
+    /// A quick fit of these points (source frame) as they are.
+    pub(super) fn from_centres(centres: Vec<Point3<f64>>) -> Self {
+        QuickFit { centres }
+    }
+
+    /// The surface voxel centres, in the source frame.
+    pub(super) fn centres(&self) -> &[Point3<f64>] {
+        &self.centres
+    }
+
+    /// The source's surface voxels placed by `pose` in `target` that are supported and
+    /// contradicted there.
+    pub(super) fn at(&self, target: &SearchTarget, pose: &Pose) -> (u64, u64) {
+        let res = target.resolution();
+        let occ = target
+            .occupied_grid(0)
+            .map_or(Occupied::Hash(target.pyramid().level(0)), Occupied::Dense);
+        let free = target.free.first().and_then(Option::as_ref);
+        let (mut supported, mut contradicted) = (0u64, 0u64);
+        for c in &self.centres {
+            let Some(k) = VoxelKey::from_point(&pose.transform_point(c), res) else {
+                continue;
+            };
+            if neighbourhood(k).any(|n| occ.at(n)) {
+                supported += 1;
+            } else if free.is_some_and(|g| deep_free(g, k)) {
+                contradicted += 1;
+            }
+        }
+        (supported, contradicted)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

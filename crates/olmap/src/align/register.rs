@@ -141,6 +141,7 @@ fn finish(
                     }
                     _ => None,
                 },
+                params.trust.min_agreement,
             )?)
         }
         _ => None,

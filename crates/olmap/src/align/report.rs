@@ -74,6 +74,15 @@ pub struct UniquenessReport {
     pub chosen: Option<usize>,
     /// The best distinct refined rival's fit over the chosen one's (0 without one).
     pub verified_runner_up_ratio: f64,
+    /// The distinct rival contradicted least against the chosen one (index in
+    /// `hypotheses`; [`super::verify::Verification::cleaner_rival`]), when one is supported
+    /// at least half as well.
+    #[serde(default)]
+    pub cleaner_rival: Option<usize>,
+    /// How many standard deviations fewer contradicted voxels it has than the chosen one
+    /// (the verdict doubts the match at 4 or more).
+    #[serde(default)]
+    pub cleaner_rival_sigma: Option<f64>,
 }
 
 /// One refined hypothesis ([`super::verify::Hypothesis`]).
@@ -81,7 +90,8 @@ pub struct UniquenessReport {
 pub struct HypothesisJson {
     /// Its final pose (refined when the refinement converged).
     pub pose: PoseJson,
-    /// Its search score.
+    /// Its search score (0 for a position the search did not propose: a slide along a
+    /// weakly held direction, [`super::weak_axis`]).
     pub search_score: i64,
     /// Whether its refinement converged.
     pub converged: bool,
@@ -89,6 +99,9 @@ pub struct HypothesisJson {
     pub fit: f64,
     /// The smaller of the two scans' agreements at its pose.
     pub agreement: f64,
+    /// Surface voxels of either scan that stand where the other saw through, at its pose.
+    #[serde(default)]
+    pub contradicted: u64,
 }
 
 /// The agreement of two scans where both looked ([`super::consistency`]).
@@ -217,6 +230,7 @@ impl AlignmentReport {
         let s = &r.search;
         let t = r.pose.translation();
         let (y, p, ro) = r.pose.yaw_pitch_roll();
+        let cleaner = r.verification.as_ref().and_then(|v| v.cleaner_rival());
         AlignmentReport {
             source: source.to_string(),
             target: target.to_string(),
@@ -241,6 +255,7 @@ impl AlignmentReport {
                             converged: h.refinement.converged,
                             fit: h.fit,
                             agreement: h.consistency.agreement(),
+                            contradicted: h.contradicted(),
                         })
                         .collect()
                 }),
@@ -249,6 +264,8 @@ impl AlignmentReport {
                     .verification
                     .as_ref()
                     .map_or(0.0, |v| v.runner_up_ratio()),
+                cleaner_rival: cleaner.map(|c| c.0),
+                cleaner_rival_sigma: cleaner.map(|c| c.1),
             },
             agreement: r.consistency.as_ref().map(|c| AgreementJson {
                 source: c.source.agreement(),

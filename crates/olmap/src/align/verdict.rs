@@ -26,7 +26,13 @@
 //!    `min_refutation` standard deviations of a count
 //!    ([`super::verify::Verification::refutation`]). A repeated room, a row of identical
 //!    desks or a symmetric hall gives a rival that fits as well as the winner and is not
-//!    refuted; an answer whose rival the free space rules out is unique.
+//!    refuted; an answer whose rival the free space rules out is unique. Nor may a
+//!    distinct rival that the scans support at least half as well
+//!    ([`super::verify::CLEANER_MIN_SUPPORT`]) be contradicted by `min_refutation`
+//!    standard deviations *less* than the winner
+//!    ([`super::verify::Verification::cleaner_rival`]): the fit trades one contradiction
+//!    for eight supports, and along a corridor a look-alike that overlaps more can win on
+//!    support while standing hundreds of voxels in the other scan's free space.
 //!
 //!    The search's own score gap (best over best distinct, [`super::Alignment::runner_up_ratio`])
 //!    and the spread of near-best poses ([`super::Alignment::spread`]) are reported but not
@@ -124,22 +130,37 @@ pub(super) fn search_doubts(search: &Alignment, t: &TrustThresholds) -> Vec<Stri
 /// Doubts about the uniqueness of the verified winner (test 3): a distinct rival that
 /// the scans do not refute.
 pub(super) fn uniqueness_doubts(v: &Verification, t: &TrustThresholds) -> Vec<String> {
-    let Some(i) = v.runner_up else {
-        return Vec::new();
+    let mut doubts = Vec::new();
+    let apart = |i: usize| {
+        let (best, rival) = (v.winner().pose(), v.hypotheses[i].pose());
+        let d = (rival.translation() - best.translation()).norm();
+        (d, rival.rotation().angle_to(&best.rotation()).to_degrees())
     };
-    let z = v.refutation();
-    if z >= t.min_refutation {
-        return Vec::new();
+    if let Some(i) = v.runner_up {
+        let z = v.refutation();
+        if z < t.min_refutation {
+            let (d, a) = apart(i);
+            let (fw, fr) = (v.winner().fit, v.hypotheses[i].fit);
+            doubts.push(format!(
+                "a distinct solution {d:.2} m and {a:.0}° away fits nearly as well (fit {fr:.0} \
+                 against {fw:.0}; gap {z:.1} < {:.1} σ): the place repeats or is symmetric",
+                t.min_refutation
+            ));
+        }
     }
-    let (best, rival) = (v.winner().pose(), v.hypotheses[i].pose());
-    let d = (rival.translation() - best.translation()).norm();
-    let a = rival.rotation().angle_to(&best.rotation()).to_degrees();
-    let (fw, fr) = (v.winner().fit, v.hypotheses[i].fit);
-    vec![format!(
-        "a distinct solution {d:.2} m and {a:.0}° away fits nearly as well (fit {fr:.0} against \
-         {fw:.0}; gap {z:.1} < {:.1} σ): the place repeats or is symmetric",
-        t.min_refutation
-    )]
+    if let Some((i, z)) = v.cleaner_rival() {
+        if z >= t.min_refutation {
+            let (d, a) = apart(i);
+            let (cw, cr) = (v.winner().contradicted(), v.hypotheses[i].contradicted());
+            doubts.push(format!(
+                "a distinct solution {d:.2} m and {a:.0}° away leaves far fewer surfaces where \
+                 the other scan saw through ({cr} against {cw} voxels; {z:.1} ≥ {:.1} σ): the \
+                 match may lay a look-alike place over the true one",
+                t.min_refutation
+            ));
+        }
+    }
+    doubts
 }
 
 /// Doubts about the refinement (tests 4-5); `dof` says which axes were searched.
