@@ -34,7 +34,8 @@ pub use scanners::{
 pub use shape::{Hit, Material, Object, Shape, RAY_EPSILON, ROBOT_ID_BASE};
 pub use sighting::{sightings_at, Sighting, SightingModel};
 pub use trust_suite::{
-    pose_error, trust_cases, Answer, TrustCase, TrustScene, RIGHT_ROTATION, RIGHT_TRANSLATION,
+    pose_error, trust_case, trust_cases, Answer, TrustCase, TrustScene, RIGHT_ROTATION,
+    RIGHT_TRANSLATION,
 };
 pub use world::{room_shell, World};
 pub use worlds::{

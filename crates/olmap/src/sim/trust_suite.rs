@@ -241,17 +241,34 @@ pub fn trust_cases(
 ) -> Result<Vec<TrustCase>> {
     let total = per_scene * TrustScene::ALL.len();
     let mut out = Vec::with_capacity(total);
-    for (s, scene) in TrustScene::ALL.into_iter().enumerate() {
+    for scene in TrustScene::ALL {
         for k in 0..per_scene {
-            let mut rng = SimRng::for_item(seed, 0x7275_7374 + s as u64, k as u64);
-            let case_seed = rng.next_u64();
-            let mut case = draw(scene, case_seed, &mut rng)?;
-            case.name = format!("{}-{k:02}", scene.name());
-            out.push(case);
+            out.push(trust_case(seed, scene, k)?);
             progress(out.len(), total);
         }
     }
     Ok(out)
+}
+
+/// Pair `index` of `scene` in the suite of `seed`: the same pair [`trust_cases`] draws
+/// there (its draws depend on the seed, the kind and the index alone), without drawing
+/// the others.
+///
+/// ```no_run
+/// use olmap::sim::{trust_case, TrustScene};
+/// let case = trust_case(4, TrustScene::RingCorridor, 7).unwrap();
+/// assert_eq!(case.name, "ring-corridor-07");
+/// ```
+pub fn trust_case(seed: u64, scene: TrustScene, index: usize) -> Result<TrustCase> {
+    let s = TrustScene::ALL
+        .iter()
+        .position(|&k| k == scene)
+        .unwrap_or_default();
+    let mut rng = SimRng::for_item(seed, 0x7275_7374 + s as u64, index as u64);
+    let case_seed = rng.next_u64();
+    let mut case = draw(scene, case_seed, &mut rng)?;
+    case.name = format!("{}-{index:02}", scene.name());
+    Ok(case)
 }
 
 /// The scanner and robot every pair uses.

@@ -12,10 +12,11 @@ use crate::data;
 /// A short pass of the trust suite (2 pairs of each of the 14 kinds, a seed the thresholds
 /// were not chosen on): no trusted answer is wrong. (That the verdict is not simply "never"
 /// is checked on real data: `a_scan_against_itself_is_trusted_at_the_identity` and the
-/// real pairs of `align.rs`.)
+/// real pairs of `align.rs`.) Until the cleaner-rival test (`Verification::cleaner_rival`)
+/// desk-rows-01 was trusted 6.05 m off here. The whole suite at this seed (17 pairs of
+/// each kind) still trusts 8 of 238 pairs wrongly, 3 of them unrelated places: this pass
+/// guards what is fixed, it does not say the verdict is done (issue 22).
 #[test]
-#[ignore = "issue 22 acceptance not met yet: desk-rows-01 (seed 11) is trusted 6.05 m off; \
-            the suite trusts 1-3 % of its pairs wrongly (stop note of 2026-12-02)"]
 fn trust_suite_short_pass_has_no_trusted_wrong_answer() {
     let report = run_trust(
         &TrustOptions {
@@ -80,6 +81,41 @@ fn trust_suite_full_has_no_trusted_wrong_answer() {
         );
     }
     assert_eq!(report.trusted_wrong, 0);
+}
+
+/// Along a corridor every shift overlaps about as well, so the global search's few best
+/// poses can all lie metres from the truth; the verification then slides the scan along
+/// the weakly held direction (`olmap::align::weak_axis`) and doubts a winner that a
+/// cleaner rival refutes (`Verification::cleaner_rival`). On the trust suite's corridor
+/// ring (seed 4, pairs 0-8: two scans 1-6 m apart along one long side) the search alone
+/// found 1 of the 9 truths and 2 answers were trusted 3.9 and 5.5 m off. Now no trusted
+/// answer is wrong (a trusted pose where the rescanned world looks the same is a
+/// look-alike, not an error), and more than half are trusted and right: a corridor ring
+/// has junctions and furniture within a scan's reach, so a verdict that finds the truth
+/// must be able to say so.
+#[test]
+fn corridor_ring_pairs_are_found_along_the_corridor_or_doubted() {
+    let mut right = 0;
+    for k in 0..9 {
+        let case = olmap::sim::trust_case(4, olmap::sim::TrustScene::RingCorridor, k).unwrap();
+        let r = align::register(&case.source, &case.target, &RegisterParams::default()).unwrap();
+        let is_right = case.is_right(&r.pose).unwrap();
+        eprintln!(
+            "{}: trusted {} right {is_right} {:?}",
+            case.name, r.trusted, r.doubts
+        );
+        if r.trusted && !is_right {
+            assert!(
+                case.is_alias(&r.pose).unwrap(),
+                "{} trusted {:.2} m off: {:?}",
+                case.name,
+                olmap::sim::pose_error(&r.pose, &case.truth.unwrap()).0,
+                r.verification.map(|v| v.hypotheses.len())
+            );
+        }
+        right += usize::from(r.trusted && is_right);
+    }
+    assert!(right >= 5, "only {right} of 9 trusted and right");
 }
 
 /// Audit 1: a real 3DTK scan mirrored (y -> -y) against the original has no rigid
