@@ -17,7 +17,6 @@ mod significance;
 mod target;
 pub mod verdict;
 pub mod verify;
-pub mod weak_axis;
 
 pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
 pub use consistency::{

@@ -91,7 +91,7 @@ pub struct HypothesisJson {
     /// Its final pose (refined when the refinement converged).
     pub pose: PoseJson,
     /// Its search score (0 for a position the search did not propose: a slide along a
-    /// weakly held direction, [`super::weak_axis`]).
+    /// weakly held direction, [`super::verify::weak_axis`]).
     pub search_score: i64,
     /// Whether its refinement converged.
     pub converged: bool,

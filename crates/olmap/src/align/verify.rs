@@ -34,7 +34,7 @@
 //!
 //! A global search (no prior) whose best thin-stage hypothesis leaves a horizontal
 //! translation weakly held — a corridor's length — also verifies up to three positions
-//! along that direction that the search did not propose ([`super::weak_axis`]).
+//! along that direction that the search did not propose ([`weak_axis`]).
 
 use std::time::Instant;
 
@@ -44,10 +44,12 @@ use super::icp::{
 };
 use super::lattice::{Alignment, Candidate};
 use super::target::SearchTarget;
-use super::weak_axis::{slide_starts, weak_horizontal_axis};
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::{Aabb, Pose};
+use weak_axis::{slide_starts, weak_horizontal_axis};
+
+pub mod weak_axis;
 
 /// One contradiction (a surface voxel where the other scan saw through) costs this many
 /// supported voxels in a hypothesis' fit.
@@ -76,7 +78,7 @@ pub const DISTINCT_ROTATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
 #[derive(Debug, Clone)]
 pub struct Hypothesis {
     /// The pose it started from: the search's, with its search score, or a slide along
-    /// the winner's weakly held direction ([`super::weak_axis`]; overlap and score 0).
+    /// the winner's weakly held direction ([`weak_axis`]; overlap and score 0).
     pub start: Candidate,
     /// Its refinement: finished on the full source for the winner and the rivals that
     /// could be its runner-up; the thin stage's alone (10x the epsilons, statistics of the
@@ -255,7 +257,7 @@ pub(super) struct RefineAgainst<'a> {
 /// margin in metres) the distinct runner-up is chosen among the rivals no farther from the
 /// prior than the winner plus the margin. `min_agreement` is the verdict's agreement
 /// threshold: a global search's best hypothesis is slid along a weakly held direction
-/// ([`super::weak_axis`]) only when it passes it.
+/// ([`weak_axis`]) only when it passes it.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn verify(
     source: &PointCloud,

@@ -85,7 +85,7 @@ fn trust_suite_full_has_no_trusted_wrong_answer() {
 
 /// Along a corridor every shift overlaps about as well, so the global search's few best
 /// poses can all lie metres from the truth; the verification then slides the scan along
-/// the weakly held direction (`olmap::align::weak_axis`) and doubts a winner that a
+/// the weakly held direction (`olmap::align::verify::weak_axis`) and doubts a winner that a
 /// cleaner rival refutes (`Verification::cleaner_rival`). On the trust suite's corridor
 /// ring (seed 4, pairs 0-8: two scans 1-6 m apart along one long side) the search alone
 /// found 1 of the 9 truths and 2 answers were trusted 3.9 and 5.5 m off. Now no trusted

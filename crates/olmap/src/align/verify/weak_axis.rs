@@ -11,22 +11,23 @@
 //! off.
 //!
 //! So when the verified winner's weakest direction is a horizontal translation clearly
-//! weaker than the next ([`WEAK_AXIS_RATIO`], [`WEAK_AXIS_MIN_HORIZONTAL`]), the scan is
-//! slid along that direction, one finest cell at a time over its own length (at most
-//! [`WEAK_AXIS_MAX_SLIDE`] each way), as placed by the winner and turned end for end about
-//! its centroid (a corridor looks alike both ways; turning mirrors the centroid's offset
-//! from the corridor's centre line, so the turned copy is first moved back across the
-//! corridor, up to [`LATERAL_CELLS`] cells, to where its walls are best supported). Every position is counted by [`QuickFit`] (the source
-//! side of the agreement, on the finest level, at a fraction of its cost); the
-//! [`WEAK_AXIS_BY_FIT`] positions with the best quick fit and the [`WEAK_AXIS_BY_AGREEMENT`]
-//! cleanest one (fewest contradicted voxels per supported one), each at least
-//! [`WEAK_AXIS_SEPARATION`] from the others and from every hypothesis already verified,
-//! become hypotheses of their own: refined and counted like the search's
-//! ([`super::verify`]). Either the truth then wins, or a look-alike that fits about as
-//! well becomes the distinct runner-up, or the truth — farther along, overlapping less,
-//! contradicting nothing — becomes the cleaner rival
-//! ([`super::verify::Verification::cleaner_rival`]), and the verdict doubts the
-//! match: all better than a trusted pose metres off.
+//! weaker than the next ([`WEAK_AXIS_RATIO`], [`WEAK_AXIS_MIN_HORIZONTAL`]) and the winner
+//! agrees with the scans as a trusted answer must, the scan is slid along that direction,
+//! one finest cell at a time over its own length (at most [`WEAK_AXIS_MAX_SLIDE`] each
+//! way), as placed by the winner and turned end for end about its centroid (a corridor
+//! looks alike both ways; turning mirrors the centroid's offset from the corridor's centre
+//! line, so the turned copy is first moved back across the corridor, up to
+//! [`LATERAL_CELLS`] cells, to where its walls are best supported). Every position is
+//! counted by `consistency::QuickFit` (the source side of the agreement, on the finest
+//! level, at a fraction of its cost); the [`WEAK_AXIS_BY_FIT`] positions with the best
+//! quick fit and the [`WEAK_AXIS_BY_AGREEMENT`] cleanest one (fewest contradicted voxels
+//! per supported one), each at least [`WEAK_AXIS_SEPARATION`] from the others and from
+//! every hypothesis already verified, become hypotheses of their own, refined and counted
+//! like the search's ([`super`]). Either the truth then wins, or a look-alike that fits
+//! about as well becomes the distinct runner-up, or the truth — farther along, overlapping
+//! less, contradicting nothing — becomes the cleaner rival
+//! ([`super::Verification::cleaner_rival`]) and the verdict doubts the match: all better
+//! than a trusted pose metres off.
 //!
 //! Cost: only global searches whose winner is weakly held pay it (no real pair of the
 //! shared data does); on the corridor kinds of the trust suite it about doubles a
@@ -35,11 +36,11 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::consistency::QuickFit;
-use super::icp::Degeneracy;
-use super::lattice::Candidate;
-use super::target::SearchTarget;
-use super::verify::{CLEANER_MIN_SUPPORT, CONTRADICTION_WEIGHT, DISTINCT_ROTATION};
+use super::{CLEANER_MIN_SUPPORT, CONTRADICTION_WEIGHT, DISTINCT_ROTATION};
+use crate::align::consistency::QuickFit;
+use crate::align::icp::Degeneracy;
+use crate::align::lattice::Candidate;
+use crate::align::target::SearchTarget;
 use crate::geometry::Pose;
 
 /// The winner's weakest eigenvalue must be below this fraction of the next for its
