@@ -141,7 +141,8 @@ fn finish(
                     }
                     _ => None,
                 },
-                params.trust.min_agreement,
+                matches!(params.search.region, super::Region::Global)
+                    .then_some(params.trust.min_agreement),
             )?)
         }
         _ => None,
@@ -149,7 +150,8 @@ fn finish(
     let (pose, refinement, consistency) = match &verification {
         Some(v) => {
             let w = v.winner();
-            doubts.extend(uniqueness_doubts(v, &params.trust));
+            let global = matches!(params.search.region, super::Region::Global);
+            doubts.extend(uniqueness_doubts(v, &params.trust, global));
             doubts.extend(refinement_doubts(
                 &w.start,
                 &w.refinement,

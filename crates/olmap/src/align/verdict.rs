@@ -30,9 +30,10 @@
 //!    distinct rival that the scans support at least half as well
 //!    ([`super::verify::CLEANER_MIN_SUPPORT`]) be contradicted by `min_refutation`
 //!    standard deviations *less* than the winner
-//!    ([`super::verify::Verification::cleaner_rival`]): the fit trades one contradiction
-//!    for eight supports, and along a corridor a look-alike that overlaps more can win on
-//!    support while standing hundreds of voxels in the other scan's free space.
+//!    ([`super::verify::Verification::cleaner_rival`]; global searches only): the fit
+//!    trades one contradiction for eight supports, and along a corridor a look-alike that
+//!    overlaps more can win on support while standing hundreds of voxels in the other
+//!    scan's free space.
 //!
 //!    The search's own score gap (best over best distinct, [`super::Alignment::runner_up_ratio`])
 //!    and the spread of near-best poses ([`super::Alignment::spread`]) are reported but not
@@ -129,7 +130,13 @@ pub(super) fn search_doubts(search: &Alignment, t: &TrustThresholds) -> Vec<Stri
 
 /// Doubts about the uniqueness of the verified winner (test 3): a distinct rival that
 /// the scans do not refute.
-pub(super) fn uniqueness_doubts(v: &Verification, t: &TrustThresholds) -> Vec<String> {
+/// The cleaner-rival test applies to searches over every pose only (`global`): in a window
+/// or a sighting's locus the prior already rules out far look-alikes.
+pub(super) fn uniqueness_doubts(
+    v: &Verification,
+    t: &TrustThresholds,
+    global: bool,
+) -> Vec<String> {
     let mut doubts = Vec::new();
     let apart = |i: usize| {
         let (best, rival) = (v.winner().pose(), v.hypotheses[i].pose());
@@ -148,7 +155,7 @@ pub(super) fn uniqueness_doubts(v: &Verification, t: &TrustThresholds) -> Vec<St
             ));
         }
     }
-    if let Some((i, z)) = v.cleaner_rival() {
+    if let Some((i, z)) = v.cleaner_rival().filter(|_| global) {
         if z >= t.min_refutation {
             let (d, a) = apart(i);
             let (cw, cr) = (v.winner().contradicted(), v.hypotheses[i].contradicted());

@@ -164,7 +164,7 @@ impl Verification {
     /// of voxels where the other scan saw through: on the trust suite's corridor ring a
     /// pose 5.5 m off fit 15,500 with 448 contradicted voxels, the truth 12,300 with none.
     /// A positive value far above noise says the scans themselves refute the winner more
-    /// than that rival (the verdict doubts it: [`super::verdict`]).
+    /// than that rival (the verdict doubts a global match for it: [`super::verdict`]).
     pub fn cleaner_rival(&self) -> Option<(usize, f64)> {
         let support = |h: &Hypothesis| {
             let t = h.consistency.target.unwrap_or_default();
@@ -255,9 +255,10 @@ pub(super) struct RefineAgainst<'a> {
 /// them, prepared once for all hypotheses; the agreement on them cropped to `reach` metres
 /// around each hypothesis' footprint). With `prior` (a window search's prior pose and a
 /// margin in metres) the distinct runner-up is chosen among the rivals no farther from the
-/// prior than the winner plus the margin. `min_agreement` is the verdict's agreement
-/// threshold: a global search's best hypothesis is slid along a weakly held direction
-/// ([`weak_axis`]) only when it passes it.
+/// prior than the winner plus the margin. `slide` is `Some(min_agreement)` for a search
+/// over every pose ([`super::Region::Global`]): its best hypothesis is then slid along a
+/// weakly held direction ([`weak_axis`]) when it agrees with the scans at least that well
+/// (the verdict's agreement threshold).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn verify(
     source: &PointCloud,
@@ -267,7 +268,7 @@ pub(super) fn verify(
     icp: &IcpParams,
     reach: f64,
     prior: Option<(&Pose, f64)>,
-    min_agreement: f64,
+    slide: Option<f64>,
 ) -> Result<Verification> {
     let res = target.resolution();
     let points = against.points;
@@ -352,15 +353,17 @@ pub(super) fn verify(
             targets.push(prepared);
         }
     }
-    // A global search whose best hypothesis leaves a horizontal translation unobservable
+    // A global search (every pose) whose best hypothesis leaves a horizontal translation unobservable
     // (a corridor) also tries positions along it that the search did not propose. Only
     // when that hypothesis agrees with the scans as a trusted answer must: a corridor's
     // look-alike stretch leaves its walls on the walls, while a best that already
     // disagrees is turned or misplaced otherwise, and sliding it only finds a better
     // wrong fit (two symmetric halls of the trust suite were trusted 3.8 and 7.8 m off).
     let wide;
-    let slides = match (prior, best_fit(&hypotheses)) {
-        (None, Some(best)) if hypotheses[best].consistency.agreement() >= min_agreement => {
+    let slides = match (slide, best_fit(&hypotheses)) {
+        (Some(min_agreement), Some(best))
+            if hypotheses[best].consistency.agreement() >= min_agreement =>
+        {
             match weak_horizontal_axis(&hypotheses[best].refinement.degeneracy) {
                 Some(axis) => {
                     let quick = QuickFit::new(source, res)?;
