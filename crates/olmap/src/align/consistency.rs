@@ -351,34 +351,31 @@ pub fn consistency_seen(
 /// before any is refined: the centres of the source's surface voxels (its own frame), each
 /// moved by a pose and counted against the target's finest level alone — supported when an
 /// occupied target voxel lies within one cell, contradicted when it lies deep in the
-/// target's free space (no patch test, no range-dependent level). Its value at a pose,
-/// `supported − CONTRADICTION_WEIGHT · contradicted`, orders poses as the fit does without
-/// the cost of re-voxelising the scan at each.
+/// target's free space (no patch test, no range-dependent level), without the cost of
+/// re-voxelising the scan at each pose.
 pub(super) struct QuickFit {
     /// Surface voxel centres of the source, in the source frame.
     centres: Vec<Point3<f64>>,
 }
 
 impl QuickFit {
-    /// The surface of `source` at `resolution`.
-    pub(super) fn new(source: &PointCloud, resolution: f64) -> Result<Self> {
+    /// The surface of `source` at `resolution`: at most `max_voxels` of its voxels, a
+    /// regular subset in a fixed order (a ranking needs the shape, not every voxel).
+    pub(super) fn new(source: &PointCloud, resolution: f64, max_voxels: usize) -> Result<Self> {
         let mut list = OccupancyList::new(resolution)?;
         list.add_points(source, &Pose::identity(), 1);
         let s = surface(&list);
         let mut centres: Vec<Point3<f64>> = s.iter().map(|(k, _)| s.center(k)).collect();
-        // A fixed order: the value is a sum of integers either way, but the caller's
-        // centroid and extent are then the same bit for bit whatever the hash did.
+        // A fixed order: the subset, and the caller's centroid and extent, are then the
+        // same bit for bit whatever the hash did.
         centres.sort_by(|a, b| {
             (a.x, a.y, a.z)
                 .partial_cmp(&(b.x, b.y, b.z))
                 .unwrap_or(std::cmp::Ordering::Equal)
         });
+        let stride = centres.len().div_ceil(max_voxels.max(1)).max(1);
+        let centres = centres.into_iter().step_by(stride).collect();
         Ok(QuickFit { centres })
-    }
-
-    /// A quick fit of these points (source frame) as they are.
-    pub(super) fn from_centres(centres: Vec<Point3<f64>>) -> Self {
-        QuickFit { centres }
     }
 
     /// The surface voxel centres, in the source frame.

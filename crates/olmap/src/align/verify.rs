@@ -47,7 +47,7 @@ use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::{Aabb, Pose};
-use weak_axis::{slide_starts, weak_horizontal_axis};
+use weak_axis::{slide_starts, weak_horizontal_axis, MAX_QUICK_VOXELS};
 
 pub mod weak_axis;
 
@@ -95,6 +95,12 @@ impl Hypothesis {
     pub fn contradicted(&self) -> u64 {
         let t = self.consistency.target.unwrap_or_default();
         self.consistency.source.contradicted + t.contradicted
+    }
+
+    /// Surface voxels of either scan that the other supports at this hypothesis' pose.
+    pub fn supported(&self) -> u64 {
+        let t = self.consistency.target.unwrap_or_default();
+        self.consistency.source.supported + t.supported
     }
 
     /// The final pose: refined when the refinement converged, else the search's.
@@ -166,15 +172,11 @@ impl Verification {
     /// A positive value far above noise says the scans themselves refute the winner more
     /// than that rival (the verdict doubts a global match for it: [`super::verdict`]).
     pub fn cleaner_rival(&self) -> Option<(usize, f64)> {
-        let support = |h: &Hypothesis| {
-            let t = h.consistency.target.unwrap_or_default();
-            (h.consistency.source.supported + t.supported) as f64
-        };
         let w = self.winner();
-        let (sw, cw) = (support(w), w.contradicted() as f64);
+        let (sw, cw) = (w.supported() as f64, w.contradicted() as f64);
         self.rivals
             .iter()
-            .filter(|&&i| support(&self.hypotheses[i]) >= CLEANER_MIN_SUPPORT * sw)
+            .filter(|&&i| self.hypotheses[i].supported() as f64 >= CLEANER_MIN_SUPPORT * sw)
             .map(|&i| {
                 let cr = self.hypotheses[i].contradicted() as f64;
                 (i, (cw - cr) / (cw + cr + 1.0).sqrt())
@@ -199,11 +201,7 @@ pub fn same_solution(a: &Pose, b: &Pose, resolution: f64) -> bool {
 
 /// [`Verification::refutation`] of `rival` against `winner`.
 fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
-    let counts = |h: &Hypothesis| {
-        let t = h.consistency.target.unwrap_or_default();
-        let s = &h.consistency.source;
-        ((s.supported + t.supported) as f64, h.contradicted() as f64)
-    };
+    let counts = |h: &Hypothesis| (h.supported() as f64, h.contradicted() as f64);
     let ((sw, cw), (sr, cr)) = (counts(winner), counts(rival));
     let w2 = CONTRADICTION_WEIGHT * CONTRADICTION_WEIGHT;
     (winner.fit - rival.fit) / (sw + sr + w2 * (cw + cr) + 1.0).sqrt()
@@ -353,8 +351,9 @@ pub(super) fn verify(
             targets.push(prepared);
         }
     }
-    // A global search (every pose) whose best hypothesis leaves a horizontal translation unobservable
-    // (a corridor) also tries positions along it that the search did not propose. Only
+    // A global search (every pose) whose best hypothesis leaves a horizontal translation
+    // unobservable (a corridor) also tries positions along it that the search did not
+    // propose. Only
     // when that hypothesis agrees with the scans as a trusted answer must: a corridor's
     // look-alike stretch leaves its walls on the walls, while a best that already
     // disagrees is turned or misplaced otherwise, and sliding it only finds a better
@@ -366,7 +365,7 @@ pub(super) fn verify(
         {
             match weak_horizontal_axis(&hypotheses[best].refinement.degeneracy) {
                 Some(axis) => {
-                    let quick = QuickFit::new(source, res)?;
+                    let quick = QuickFit::new(source, res, MAX_QUICK_VOXELS)?;
                     let taken: Vec<Pose> = hypotheses.iter().map(Hypothesis::pose).collect();
                     slide_starts(&quick, target, &hypotheses[best].pose(), &axis, &taken)
                 }

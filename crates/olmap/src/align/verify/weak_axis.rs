@@ -78,7 +78,7 @@ pub const LATERAL_CELLS: i32 = 10;
 
 /// At most this many surface voxels are moved per position (a regular subset of the
 /// source's, in a fixed order): the ranking needs the shape, not every voxel.
-const MAX_QUICK_VOXELS: usize = 4000;
+pub(super) const MAX_QUICK_VOXELS: usize = 4000;
 
 /// The unit horizontal direction (target frame) along which a refinement's normal
 /// equations hold the pose weakly, or `None` when none does ([`WEAK_AXIS_RATIO`],
@@ -95,7 +95,8 @@ pub fn weak_horizontal_axis(d: &Degeneracy) -> Option<Vector3<f64>> {
     (h >= WEAK_AXIS_MIN_HORIZONTAL).then(|| Vector3::new(v[3] / h, v[4] / h, 0.0))
 }
 
-/// Starts along `axis` from the winner's pose `from` (module documentation): up to
+/// Starts along `axis` from the winner's pose `from` (module documentation; `quick` holds
+/// at most [`MAX_QUICK_VOXELS`] of the source's surface voxels): up to
 /// [`WEAK_AXIS_BY_FIT`] + [`WEAK_AXIS_BY_AGREEMENT`] positions, none near a pose of `taken` (the
 /// hypotheses already verified). Their search score and overlap are zero: the search never
 /// proposed them.
@@ -107,14 +108,11 @@ pub(super) fn slide_starts(
     taken: &[Pose],
 ) -> Vec<Candidate> {
     let res = target.resolution();
-    let all = quick.centres();
-    if all.is_empty() {
+    if quick.centres().is_empty() {
         return Vec::new();
     }
-    let stride = all.len().div_ceil(MAX_QUICK_VOXELS);
-    let subset = QuickFit::from_centres(all.iter().step_by(stride).copied().collect());
     // The scan's centroid and length along the axis, as the winner places it.
-    let placed: Vec<Point3<f64>> = subset
+    let placed: Vec<Point3<f64>> = quick
         .centres()
         .iter()
         .map(|c| from.transform_point(c))
@@ -139,7 +137,7 @@ pub(super) fn slide_starts(
     // of [`LATERAL_CELLS`] cells either way, where it is), then slid with a cell to spare.
     let across = |j: i32| Pose::from_translation(side * (f64::from(j) * res)) * turned;
     let lateral = (-LATERAL_CELLS..=LATERAL_CELLS)
-        .map(|j| (j, subset.at(target, &across(j)).0))
+        .map(|j| (j, quick.at(target, &across(j)).0))
         .max_by(|a, b| a.1.cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))
         .map_or(0, |(j, _)| j);
     let turned = across(lateral);
@@ -154,7 +152,7 @@ pub(super) fn slide_starts(
             poses.push(Pose::from_translation(shift) * turned);
         }
     }
-    let counts: Vec<(u64, u64)> = poses.par_iter().map(|p| subset.at(target, p)).collect();
+    let counts: Vec<(u64, u64)> = poses.par_iter().map(|p| quick.at(target, p)).collect();
     let values: Vec<f64> = counts
         .iter()
         .map(|&(s, c)| s as f64 - CONTRADICTION_WEIGHT * c as f64)
@@ -167,7 +165,7 @@ pub(super) fn slide_starts(
     };
     // The cleanest positions: the fewest contradicted voxels per supported one, among those
     // supported at least half as well as the winner (as the verdict's cleaner-rival test).
-    let (won_supported, _) = subset.at(target, from);
+    let (won_supported, _) = quick.at(target, from);
     let floor = CLEANER_MIN_SUPPORT * won_supported as f64;
     let rate = |i: usize| counts[i].1 as f64 / counts[i].0.max(1) as f64;
     let mut clean: Vec<usize> = (0..poses.len())
