@@ -6,13 +6,14 @@ use std::time::Instant;
 use super::consistency::Consistency;
 use super::icp::{IcpParams, IcpResult, IcpTarget};
 use super::lattice::Alignment;
+use super::lattice::Candidate;
 use super::search::global_search;
 use super::target::SearchTarget;
 use super::verdict::{
-    agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, window_doubts,
-    TrustThresholds,
+    agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, upright_look_doubts,
+    window_doubts, TrustThresholds,
 };
-use super::verify::{starts, verify, RefineAgainst, Verification};
+use super::verify::{starts, upright_starts, verify, RefineAgainst, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -96,6 +97,7 @@ fn finish(
     source: &PointCloud,
     against: Against<'_>,
     search: Alignment,
+    extra: &dyn Fn(&Alignment) -> Result<Vec<Candidate>>,
     params: &RegisterParams,
     start: Instant,
     on_edge: OnWindowEdge,
@@ -125,6 +127,7 @@ fn finish(
             let icp = refinement_after_search(p, resolution);
             let reach = icp.max_distance_start;
             let points = (against.points)();
+            let extra = extra(&search)?;
             Some(verify(
                 source,
                 against.target,
@@ -133,6 +136,7 @@ fn finish(
                     prepared: against.prepared,
                 },
                 &search,
+                &extra,
                 &icp,
                 reach,
                 match params.search.region {
@@ -160,6 +164,7 @@ fn finish(
                 &params.trust,
             ));
             doubts.extend(agreement_doubts(&w.consistency, &params.trust));
+            doubts.extend(upright_look_doubts(w, &params.trust));
             doubts.extend(window_doubts(&w.start.pose, &params.search));
             (w.pose(), Some(w.refinement.clone()), Some(w.consistency))
         }
@@ -315,6 +320,7 @@ pub fn register_to_prepared_or_widen(
             prepared,
         },
         search,
+        &|s: &Alignment| upright_starts(search_source, target, &params.search, s, &starts(s)),
         params,
         start,
         on_edge,
@@ -350,6 +356,7 @@ pub fn localize(
             prepared: None,
         },
         search,
+        &|s: &Alignment| upright_starts(source, &target, &search_params, s, &starts(s)),
         params,
         start,
         OnWindowEdge::Refine,

@@ -102,6 +102,14 @@ pub struct HypothesisJson {
     /// Surface voxels of either scan that stand where the other saw through, at its pose.
     #[serde(default)]
     pub contradicted: u64,
+    /// Where its start came from: `search`, `upright-look` (the search on upright
+    /// structure, [`super::verify::Origin::UprightLook`]) or `slide` ([`super::verify::weak_axis`]).
+    #[serde(default = "search_origin")]
+    pub origin: String,
+}
+
+fn search_origin() -> String {
+    "search".into()
 }
 
 /// The agreement of two scans where both looked ([`super::consistency`]).
@@ -256,6 +264,7 @@ impl AlignmentReport {
                             fit: h.fit,
                             agreement: h.consistency.agreement(),
                             contradicted: h.contradicted(),
+                            origin: h.origin.name().into(),
                         })
                         .collect()
                 }),
