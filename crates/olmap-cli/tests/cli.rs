@@ -593,6 +593,11 @@ fn align_json_and_localize_in_a_map() {
     assert!(v["significance"].as_f64().unwrap() > 10.0);
     assert!(v["seconds"].as_f64().unwrap() > 0.0);
     assert_eq!(v["trusted"], true);
+    // The real pairs are found by the search itself, not by the upright look (whose
+    // winners must agree at 0.97, more than real right pairs always do).
+    let u = &v["uniqueness"];
+    let chosen = u["chosen"].as_u64().unwrap() as usize;
+    assert_eq!(u["hypotheses"][chosen]["origin"], "search", "{u}");
     // Localisation in a voxel map of scan000.
     let dir = tempfile::tempdir().unwrap();
     let map = dir.path().join("s0.olm");

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
+use olmap::align::verify::Origin;
 use olmap::align::{self, Region, RegisterParams, Registration, SearchMode, SearchParams};
 use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
@@ -208,6 +209,21 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
                 f.degeneracy.weak.join("; ")
             );
         }
+    }
+    if let Some(v) = &r.verification {
+        let w = v.winner();
+        let from = match w.origin {
+            Origin::Search => "the search",
+            Origin::UprightLook => "the upright look (floors and ceilings thinned)",
+            Origin::Slide => "a slide along the weakly held direction",
+        };
+        let n = v.hypotheses.len();
+        println!(
+            "verified      {n} {}; the winner came from {from} (fit {:.0}, agreement {:.3})",
+            if n == 1 { "hypothesis" } else { "hypotheses" },
+            w.fit,
+            w.consistency.agreement()
+        );
     }
     if r.trusted {
         println!("trusted       yes ({:.3} s)", r.seconds);
