@@ -18,7 +18,9 @@ use nalgebra::{Point3, Vector3};
 
 use crate::geometry::Pose;
 
-pub(crate) use self::outcome::{finish, level_report, no_overlap, rank, threshold, Scored};
+pub(crate) use self::outcome::{
+    distinct, finish, level_report, no_overlap, rank, threshold, Scored,
+};
 pub use self::outcome::{Alignment, Candidate, LevelReport};
 pub(crate) use self::problem::{prepare, region_counts, Problem};
 
