@@ -5,8 +5,7 @@ use std::time::Instant;
 
 use super::consistency::Consistency;
 use super::icp::{IcpParams, IcpResult, IcpTarget};
-use super::lattice::Alignment;
-use super::lattice::Candidate;
+use super::lattice::{Alignment, Candidate};
 use super::search::global_search;
 use super::target::SearchTarget;
 use super::verdict::{

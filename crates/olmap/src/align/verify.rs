@@ -459,11 +459,10 @@ pub(super) fn verify(
     }
     // A global search (every pose) whose best hypothesis leaves a horizontal translation
     // unobservable (a corridor) also tries positions along it that the search did not
-    // propose. Only
-    // when that hypothesis agrees with the scans as a trusted answer must: a corridor's
-    // look-alike stretch leaves its walls on the walls, while a best that already
-    // disagrees is turned or misplaced otherwise, and sliding it only finds a better
-    // wrong fit (two symmetric halls of the trust suite were trusted 3.8 and 7.8 m off).
+    // propose, only when that hypothesis agrees with the scans as a trusted answer must:
+    // a corridor's look-alike stretch leaves its walls on the walls, while a best that
+    // already disagrees is turned or misplaced otherwise, and sliding it only finds a
+    // better wrong fit (two symmetric halls of the trust suite were trusted 3.8 and 7.8 m off).
     let wide;
     let slides = match (slide, best_fit(&hypotheses)) {
         (Some(min_agreement), Some(best))
