@@ -13,6 +13,10 @@ use crate::node::{NetOptions, Node, NodeOptions};
 use crate::protocol::RecordMessage;
 use crate::robot::occupancy_record;
 
+/// The benchmark stops waiting when no scan was placed for this long after the last
+/// publish (the rest wait for a sighting that never comes; the report says how many).
+const STALL: Duration = Duration::from_secs(60);
+
 /// What the benchmark runs.
 #[derive(Debug, Clone)]
 pub struct NetBenchOptions {
@@ -26,10 +30,15 @@ pub struct NetBenchOptions {
     pub resolution: f64,
     /// Simulator seed (default 1).
     pub seed: u64,
-    /// Give up waiting for every scan to be placed after this long (default 30 min).
+    /// Give up waiting for every scan to be placed after this long from the first publish
+    /// (default 30 min), or once no scan was placed for a minute after the last publish.
     pub timeout: Duration,
     /// Loopback port of the mapper (0: pick a free one).
     pub port: u16,
+    /// Robots publish out of step (robot `i` of `n` a fraction `i / n` of a period after
+    /// robot 0, as robots that do not share a clock do) instead of all in the same
+    /// instant (default false: the worst case, every stop's records queue together).
+    pub staggered: bool,
 }
 
 impl Default for NetBenchOptions {
@@ -42,6 +51,7 @@ impl Default for NetBenchOptions {
             seed: 1,
             timeout: Duration::from_secs(1800),
             port: 0,
+            staggered: false,
         }
     }
 }
@@ -57,6 +67,8 @@ pub struct NetBenchReport {
     pub rate: f64,
     /// Resolution of the occupancy lists, metres.
     pub resolution: f64,
+    /// Whether the robots published out of step ([`NetBenchOptions::staggered`]).
+    pub staggered: bool,
     /// Mean bytes of a record payload carrying the raw cloud.
     pub raw_bytes_per_scan: f64,
     /// Mean bytes of a record payload carrying the occupancy list (what is sent).
@@ -176,22 +188,41 @@ pub fn run_net_bench(
         progress("robots publishing");
         let start = Instant::now();
         let period = Duration::from_secs_f64(1.0 / opts.rate);
-        for stop in 0..opts.stops {
-            let due = start + period.mul_f64(stop as f64);
-            std::thread::sleep(due.saturating_duration_since(Instant::now()));
-            for (r, name, node) in &robots {
-                if let Some((_, list)) = lists
-                    .iter()
-                    .find(|(_, l)| l.robot == *r && l.seq as usize == stop)
-                {
-                    node.record(name, list.clone())?;
-                }
+        // Every publication, in time order: (due, robot slot, stop).
+        let slots = robots.len();
+        let mut due: Vec<(Duration, usize, usize)> = (0..opts.stops)
+            .flat_map(|stop| (0..slots).map(move |i| (stop, i)))
+            .map(|(stop, i)| {
+                let phase = if opts.staggered {
+                    i as f64 / slots as f64
+                } else {
+                    0.0
+                };
+                (period.mul_f64(stop as f64 + phase), i, stop)
+            })
+            .collect();
+        due.sort();
+        for (at, i, stop) in due {
+            std::thread::sleep((start + at).saturating_duration_since(Instant::now()));
+            let (r, name, node) = &robots[i];
+            if let Some((_, list)) = lists
+                .iter()
+                .find(|(_, l)| l.robot == *r && l.seq as usize == stop)
+            {
+                node.record(name, list.clone())?;
             }
         }
         progress("waiting for every scan to be placed");
         let total = raw.len() as u64;
-        while mapper.node().status().placed < total && start.elapsed() < opts.timeout {
+        // A scan no sighting ties to the map waits for good: stop when nothing more was
+        // placed for a while after the last publish.
+        let (mut placed, mut changed) = (0, Instant::now());
+        while placed < total && start.elapsed() < opts.timeout && changed.elapsed() < STALL {
             std::thread::sleep(Duration::from_millis(100));
+            let now = mapper.node().status().placed;
+            if now != placed {
+                (placed, changed) = (now, Instant::now());
+            }
         }
         let status = mapper.node().status();
         let published: u64 = robots
@@ -221,6 +252,7 @@ pub fn run_net_bench(
         stops: opts.stops,
         rate: opts.rate,
         resolution: opts.resolution,
+        staggered: opts.staggered,
         raw_bytes_per_scan: raw_bytes as f64 / n,
         list_bytes_per_scan: list_bytes as f64 / n,
         list_bytes_max: list_max,

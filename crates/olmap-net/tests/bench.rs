@@ -1,0 +1,38 @@
+//! The network benchmark end to end on loopback, small: three robots publishing out of step
+//! to a mapper in one process (127.0.0.1 only, a free port, bounded).
+
+use std::time::Duration;
+
+use olmap_net::bench::{run_net_bench, NetBenchOptions};
+
+/// Every record published is placed, the lists are far smaller than the raw clouds, the
+/// latencies are ordered and span no longer than the run, and the report says the robots
+/// were out of step.
+#[test]
+fn robots_out_of_step_are_all_placed_with_latencies() {
+    let opts = NetBenchOptions {
+        robots: 3,
+        stops: 3,
+        rate: 2.0,
+        timeout: Duration::from_secs(120),
+        staggered: true,
+        ..Default::default()
+    };
+    let mut stages = Vec::new();
+    let r = run_net_bench(&opts, |s| stages.push(s.to_string())).unwrap();
+    assert!(r.staggered);
+    assert_eq!((r.robots, r.stops), (3, 3));
+    assert_eq!(r.published, 9, "{r:?}");
+    // (Seed 1: every robot's first records are tied by sightings within three stops.)
+    assert_eq!(r.placed, 9, "{r:?}");
+    // A 0.1 m occupancy list of a lab scan is several times smaller than the raw cloud.
+    assert!(r.list_bytes_per_scan * 3.0 < r.raw_bytes_per_scan, "{r:?}");
+    let [p50, p95, max] = r.latency_ms.expect("latencies");
+    assert!(0.0 < p50 && p50 <= p95 && p95 <= max, "{r:?}");
+    // No record waits longer than the run itself took.
+    assert!(max <= 1000.0 * r.wall_s + 1.0, "{r:?}");
+    assert!(
+        stages.iter().any(|s| s.contains("publishing")),
+        "{stages:?}"
+    );
+}
