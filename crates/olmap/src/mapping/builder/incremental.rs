@@ -174,6 +174,9 @@ impl IncrementalMapper {
             Cow::Owned(self.params.clone()),
             Cow::Owned(team),
         )?;
+        // Scans arrive one at a time, each waiting for the last: the odometry windows
+        // start where each robot's recent odometry errors say the truth lies.
+        state.learn_odometry_errors();
         state.place(0, Pose::identity())?;
         self.placing
             .placed

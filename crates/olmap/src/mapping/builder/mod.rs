@@ -6,6 +6,7 @@ mod batch;
 mod fuse;
 mod incremental;
 mod linked;
+mod odometry_error;
 mod register;
 mod sequential;
 mod state;

@@ -3,6 +3,7 @@
 
 use std::sync::atomic::Ordering;
 
+use super::odometry_error::first_growth;
 use super::state::State;
 use crate::align::icp::{IcpParams, IcpTarget};
 use crate::align::verify::same_solution;
@@ -38,7 +39,9 @@ pub(super) fn keep_better(best: &mut Option<Found>, r: Registration, via: Placem
 impl State<'_> {
     /// Registers scan `s` against the map. First along the loci of its sightings of or by
     /// placed scans (mutual first). Then, with an odometry prediction: in windows around it
-    /// that double twice, then one as wide as the odometry tolerance; a global search only
+    /// that double twice (the incremental mapper skips those its robot's recent odometry
+    /// errors make too small: [`super::odometry_error`]), then one as wide as the odometry
+    /// tolerance; a global search only
     /// when `allow_global` (the batch mapper's last resort: the odometry may be wrong).
     /// Without odometry: globally. Returns the best registration and what found it.
     pub(super) fn register(&self, s: usize, allow_global: bool) -> Result<Found> {
@@ -52,7 +55,11 @@ impl State<'_> {
         if let Some((prior, distance)) = prediction {
             let (xy, z, yaw) = self.params.odometry_window;
             let tolerance = self.odometry_tolerance(distance);
-            let mut windows: Vec<f64> = vec![1.0, 2.0, 4.0];
+            // The doubling windows smaller than the frame's recent odometry error calls
+            // for are skipped (their match would lie in the outer half, untrusted).
+            let growths = [1.0, 2.0, 4.0];
+            let first = first_growth(&growths, xy, yaw, self.expected_odometry_error(s));
+            let mut windows: Vec<f64> = growths[first..].to_vec();
             if tolerance > 4.0 * xy {
                 windows.push(tolerance / xy);
             }
