@@ -29,6 +29,7 @@ use super::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::OccupancyList;
@@ -85,7 +86,7 @@ fn surface(list: &OccupancyList) -> OccupancyList {
 
 /// [`surface`], looking the neighbours up in `occupied` (`list`'s own voxels).
 fn surface_with(list: &OccupancyList, occupied: Occupied<'_>) -> OccupancyList {
-    list.filtered(|k, _| {
+    list.par_filtered(|k, _| {
         neighbourhood(k)
             .filter(|n| *n != k && occupied.at(*n))
             .nth(MIN_SURFACE_NEIGHBOURS - 1)
@@ -175,34 +176,50 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
     let res = other.resolution();
     let levels = other.pyramid().levels();
     let tol = ANGULAR_TOLERANCE.tan();
+    let own_grid = DenseGrid::occupied(mine, MAX_LOCAL_GRID_CELLS);
+    let own = own_grid
+        .as_ref()
+        .map_or(Occupied::Hash(mine), Occupied::Dense);
+    // Each voxel on its own (counts added in any order are the same): in chunks, side by
+    // side.
+    let keys: Vec<VoxelKey> = mine.iter().map(|(k, _)| k).collect();
+    let count_chunk = |chunk: &[VoxelKey]| {
+        let mut side = SideAgreement::default();
+        let mut through = Vec::new();
+        for &k in chunk {
+            // The level whose cell covers the angular tolerance at this range.
+            let d = (mine.center(k) - origin).norm();
+            let level = ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1);
+            let f = 1i32 << level;
+            let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
+            let occ = other.occupied_grid(level).map_or(
+                Occupied::Hash(other.pyramid().level(level)),
+                Occupied::Dense,
+            );
+            let up = is_upright(own, k);
+            side.upright += u64::from(up);
+            let near = neighbourhood(kl).any(|n| occ.at(n));
+            if near {
+                side.supported += 1;
+                side.upright_supported += u64::from(up);
+            } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
+                through.push((k, up));
+            }
+        }
+        (side, through)
+    };
+    let parts: Vec<(SideAgreement, Vec<(VoxelKey, bool)>)> =
+        keys.par_chunks(COUNT_CHUNK).map(count_chunk).collect();
     let mut side = SideAgreement {
         voxels: mine.len() as u64,
         ..Default::default()
     };
     let mut seen_through = std::collections::HashMap::new();
-    let own_grid = DenseGrid::occupied(mine, MAX_LOCAL_GRID_CELLS);
-    let own = own_grid
-        .as_ref()
-        .map_or(Occupied::Hash(mine), Occupied::Dense);
-    for (k, _) in mine.iter() {
-        // The level whose cell covers the angular tolerance at this range.
-        let d = (mine.center(k) - origin).norm();
-        let level = ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1);
-        let f = 1i32 << level;
-        let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
-        let occ = other.occupied_grid(level).map_or(
-            Occupied::Hash(other.pyramid().level(level)),
-            Occupied::Dense,
-        );
-        let up = is_upright(own, k);
-        side.upright += u64::from(up);
-        let near = neighbourhood(kl).any(|n| occ.at(n));
-        if near {
-            side.supported += 1;
-            side.upright_supported += u64::from(up);
-        } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
-            seen_through.insert(k, up);
-        }
+    for (part, through) in parts {
+        side.supported += part.supported;
+        side.upright += part.upright;
+        side.upright_supported += part.upright_supported;
+        seen_through.extend(through);
     }
     // A contradiction counts only as part of a patch: a wall or a piece of furniture
     // standing in the other's open space is a patch of voxels, a stray return (noise, a
@@ -219,6 +236,9 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
     }
     side
 }
+
+/// Voxels per parallel work item of [`count_side`].
+const COUNT_CHUNK: usize = 4096;
 
 /// Contradicted voxels (of one side) with fewer contradicted neighbours than this are
 /// stray returns and not counted ([`SideAgreement::contradicted`]).

@@ -10,6 +10,7 @@ mod lattice;
 mod multires;
 mod params;
 mod register;
+pub(crate) use register::register_preparing;
 mod report;
 mod score;
 mod search;

@@ -309,8 +309,35 @@ pub fn register_to_prepared_or_widen(
     params: &RegisterParams,
     on_edge: OnWindowEdge,
 ) -> Result<Registration> {
+    register_preparing(
+        search_source,
+        refine_source,
+        target,
+        refine_target,
+        &|| Ok(prepared),
+        params,
+        on_edge,
+    )
+}
+
+/// [`register_to_prepared_or_widen`] with the refinement's prepared target made by
+/// `prepare` while the search runs (a mapper whose map just grew builds its k-d tree, on
+/// one thread, beside the search).
+pub(crate) fn register_preparing<'p>(
+    search_source: &PointCloud,
+    refine_source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    prepare: &(dyn Fn() -> Result<Option<&'p IcpTarget>> + Sync),
+    params: &RegisterParams,
+    on_edge: OnWindowEdge,
+) -> Result<Registration> {
     let start = Instant::now();
-    let search = global_search(search_source, target, &params.search)?;
+    let (search, prepared) = rayon::join(
+        || global_search(search_source, target, &params.search),
+        prepare,
+    );
+    let (search, prepared) = (search?, prepared?);
     finish(
         refine_source,
         Against {

@@ -281,6 +281,28 @@ impl OccupancyList {
         out
     }
 
+    /// [`OccupancyList::filtered`] with `keep` asked for many voxels side by side (the same
+    /// list: the kept voxels are stored in the same order).
+    pub fn par_filtered(&self, keep: impl Fn(VoxelKey, u16) -> bool + Sync) -> OccupancyList {
+        use rayon::prelude::*;
+        let entries: Vec<_> = self.table.entries().collect();
+        let kept: Vec<bool> = entries
+            .par_iter()
+            .with_min_len(1024)
+            .map(|e| keep(unpack_key(entry_key(*e)), entry_count(*e)))
+            .collect();
+        let mut out = OccupancyList {
+            resolution: self.resolution,
+            table: VoxelTable::default(),
+        };
+        for (e, k) in entries.iter().zip(kept) {
+            if k {
+                out.table.update(entry_key(*e), |_| entry_count(*e));
+            }
+        }
+        out
+    }
+
     /// The voxels with a count of at least `min_count` (e.g. 2 to drop single mixed-pixel
     /// returns, thesis §4.4.1).
     pub fn threshold(&self, min_count: u16) -> OccupancyList {

@@ -291,6 +291,36 @@ fn refine_from(
     ))
 }
 
+/// Poses a refinement stops at (see [`refine_unless_joining`]): an earlier refinement's
+/// results, and how near (metres, radians) counts as joining one of them.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Joins<'a> {
+    /// The poses.
+    pub(crate) poses: &'a [Pose],
+    /// Translation tolerance, metres.
+    pub(crate) translation: f64,
+    /// Rotation tolerance, radians.
+    pub(crate) rotation: f64,
+}
+
+impl Joins<'_> {
+    /// No pose to join.
+    const NONE: Joins<'static> = Joins {
+        poses: &[],
+        translation: 0.0,
+        rotation: 0.0,
+    };
+
+    /// Whether `pose` lies within the tolerances of one of the poses.
+    fn joined(&self, pose: &Isometry3<f64>) -> bool {
+        self.poses.iter().any(|p| {
+            let d = p.isometry().inverse() * pose;
+            (p.isometry().translation.vector - pose.translation.vector).norm() <= self.translation
+                && d.rotation.angle() <= self.rotation
+        })
+    }
+}
+
 /// [`refine_to`] with the source prepared too (parameters and initial pose already
 /// checked), to `depth`; `spent` iterations were already spent on this refinement (by the
 /// [`Depth::Coarse`] run a [`Depth::Finish`] continues; 0 otherwise): the stages together
@@ -307,6 +337,39 @@ pub(crate) fn refine_prepared(
     started: Instant,
     memory: &mut NearestMemory,
 ) -> IcpResult {
+    match refine_unless_joining(
+        src,
+        target,
+        initial,
+        params,
+        depth,
+        spent,
+        started,
+        memory,
+        Joins::NONE,
+    ) {
+        Some(r) => r,
+        // Without a pose to join, no refinement gives up.
+        None => unreachable!("a refinement with no pose to join ended by joining one"),
+    }
+}
+
+/// [`refine_prepared`] that gives up (`None`) as soon as its estimate comes within the
+/// tolerances of one of `joins`' poses, the start included: a verification's rival that
+/// runs into a hypothesis already refined ends there (its refinement from that point on is
+/// the earlier one's again, and the verification would drop it as the same solution).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn refine_unless_joining(
+    src: &IcpSource,
+    target: &IcpTarget,
+    initial: &Pose,
+    params: &IcpParams,
+    depth: Depth,
+    spent: usize,
+    started: Instant,
+    memory: &mut NearestMemory,
+    joins: Joins<'_>,
+) -> Option<IcpResult> {
     let tgt = target.inner.as_ref();
     let mut pose = *initial.isometry();
     let mut converged = false;
@@ -338,7 +401,11 @@ pub(crate) fn refine_prepared(
                 1.0,
                 budget,
                 fine_cache,
+                joins,
             );
+            if s.joined {
+                return None;
+            }
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else if depth == Depth::Full && reserve == 0 {
             let s = schedule(
@@ -350,7 +417,11 @@ pub(crate) fn refine_prepared(
                 1.0,
                 params.max_iterations,
                 fine_cache,
+                joins,
             );
+            if s.joined {
+                return None;
+            }
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else {
             let (first_src, first_cache) = match thin {
@@ -366,14 +437,21 @@ pub(crate) fn refine_prepared(
                 COARSE_EPSILON_FACTOR,
                 params.max_iterations - reserve,
                 first_cache,
+                joins,
             );
+            if first.joined {
+                return None;
+            }
             (pose, converged, iterations) = (first.pose, first.converged, first.iterations);
             // A first stage that found too few correspondences (or no solution) ends it.
             if depth == Depth::Full && !first.stopped {
                 let budget = params.max_iterations - iterations;
                 let s = schedule(
-                    &src.fine, tgt, pose, first.d, params, 1.0, budget, fine_cache,
+                    &src.fine, tgt, pose, first.d, params, 1.0, budget, fine_cache, joins,
                 );
+                if s.joined {
+                    return None;
+                }
                 (pose, converged) = (s.pose, s.converged);
                 iterations += s.iterations;
             }
@@ -394,7 +472,7 @@ pub(crate) fn refine_prepared(
         converged = false;
     }
 
-    IcpResult {
+    Some(IcpResult {
         pose: Pose::from_isometry(pose),
         converged,
         iterations,
@@ -405,7 +483,7 @@ pub(crate) fn refine_prepared(
         hessian,
         inliers,
         seconds: started.elapsed().as_secs_f64(),
-    }
+    })
 }
 
 /// Where a run of the schedule ended.
@@ -417,12 +495,14 @@ struct Settled {
     iterations: usize,
     /// Ended by too few correspondences or unsolvable normal equations.
     stopped: bool,
+    /// Ended by coming within the tolerances of a pose to join ([`Joins`]).
+    joined: bool,
 }
 
 /// The Gauss-Newton iterations with the shrinking correspondence distance (module
 /// documentation), from `pose` at distance `d`, on `src`, with the epsilons scaled by
 /// `eps_scale`, for at most `max_iterations`; `cache` remembers `src`'s nearest target
-/// points.
+/// points. It ends as soon as the estimate joins one of `joins`' poses.
 #[allow(clippy::too_many_arguments)]
 fn schedule(
     src: &Source,
@@ -433,6 +513,7 @@ fn schedule(
     eps_scale: f64,
     max_iterations: usize,
     cache: &mut NearestCache,
+    joins: Joins<'_>,
 ) -> Settled {
     let (eps_t, eps_r) = (
         params.translation_epsilon * eps_scale,
@@ -445,7 +526,12 @@ fn schedule(
     let mut two_back: Option<Isometry3<f64>> = None;
     let mut previous: Option<(Vector6<f64>, f64)> = None;
     let mut stopped = false;
+    let mut joined = false;
     for _ in 0..max_iterations {
+        if joins.joined(&pose) {
+            joined = true;
+            break;
+        }
         iterations += 1;
         let at_end = d <= params.max_distance_end;
         let centre = pose * src.centroid;
@@ -537,6 +623,7 @@ fn schedule(
         converged,
         iterations,
         stopped,
+        joined,
     }
 }
 
@@ -957,6 +1044,61 @@ mod tests {
     /// A target prepared once gives every refinement exactly what preparing it again would
     /// (its normals, computed on first use, depend on the target alone), and refuses a
     /// refinement with other target parameters.
+    /// A refinement given poses to join stops (`None`) once its estimate comes within the
+    /// tolerances of one, and is the plain refinement when it never comes near one.
+    #[test]
+    fn a_refinement_stops_where_it_joins_an_earlier_result() {
+        let truth = Pose::from_xyz_ypr(0.15, -0.1, 0.02, 0.05, 0.01, 0.0);
+        let (source, target) = scene_pair(&structured_scene(), &truth, 0.005, 7);
+        let params = IcpParams::default();
+        let prepared = IcpTarget::new(&target, &params).unwrap();
+        let src = IcpSource::new(&source, &params).unwrap();
+        let run = |joins: Joins<'_>| {
+            let mut memory = NearestMemory::new(&src);
+            refine_unless_joining(
+                &src,
+                &prepared,
+                &Pose::identity(),
+                &params,
+                Depth::Coarse,
+                0,
+                Instant::now(),
+                &mut memory,
+                joins,
+            )
+        };
+        let plain = run(Joins::NONE).unwrap();
+        assert!(plain.converged);
+        assert!((plain.pose.translation() - truth.translation()).norm() < 0.01);
+        // The earlier result it runs into (2 cm and 0.5° around the truth).
+        let earlier = [truth];
+        let joined = run(Joins {
+            poses: &earlier,
+            translation: 0.02,
+            rotation: 0.5f64.to_radians(),
+        });
+        assert!(joined.is_none());
+        // A pose it never comes near changes nothing.
+        let elsewhere = [Pose::from_xyz_ypr(2.0, 2.0, 0.0, 1.0, 0.0, 0.0)];
+        let apart = run(Joins {
+            poses: &elsewhere,
+            translation: 0.1,
+            rotation: 1f64.to_radians(),
+        })
+        .unwrap();
+        assert_eq!(apart.pose, plain.pose);
+        assert_eq!(apart.iterations, plain.iterations);
+        // Nor does the same pose with tolerances too tight to reach (the estimate
+        // converges about a millimetre from the truth in this noisy scene).
+        let strict = run(Joins {
+            poses: &earlier,
+            translation: 1e-6,
+            rotation: 1e-6,
+        })
+        .unwrap();
+        assert_eq!(strict.pose, plain.pose);
+    }
+
     #[test]
     fn a_prepared_target_gives_the_same_refinements() {
         let truth = Pose::from_xyz_ypr(0.15, -0.1, 0.02, 0.05, 0.01, 0.0);

@@ -6,10 +6,9 @@ use std::sync::atomic::Ordering;
 use super::odometry_error::first_growth;
 use super::state::State;
 use crate::align::icp::{IcpParams, IcpTarget};
+use crate::align::register_preparing;
 use crate::align::verify::same_solution;
-use crate::align::{
-    register_to_prepared_or_widen, OnWindowEdge, Region, RegisterParams, Registration,
-};
+use crate::align::{OnWindowEdge, Region, RegisterParams, Registration};
 use crate::error::Result;
 use crate::geometry::Pose;
 use crate::mapping::links::Placement;
@@ -179,16 +178,17 @@ impl State<'_> {
         on_edge: OnWindowEdge,
     ) -> Result<Registration> {
         self.registrations.fetch_add(1, Ordering::Relaxed);
-        let prepared = match &params.refine {
-            Some(icp) => Some(self.prepared_map(icp)?),
-            None => None,
+        // The map's k-d tree (built after the map grew) is made beside the search.
+        let prepare = || match &params.refine {
+            Some(icp) => self.prepared_map(icp).map(Some),
+            None => Ok(None),
         };
-        register_to_prepared_or_widen(
+        register_preparing(
             self.cloud(s),
             &self.scans[s].cloud,
             &self.target,
             self.refine_points(),
-            prepared,
+            &prepare,
             params,
             on_edge,
         )
