@@ -444,7 +444,7 @@ pub(super) fn verify(
             translation: JOIN_FRACTION * DISTINCT_TRANSLATION_CELLS * res,
             rotation: JOIN_FRACTION * DISTINCT_ROTATION,
         };
-        let Some(refinement) = refine_unless_joining(
+        let refinement = refine_unless_joining(
             &thin,
             against,
             &start.pose,
@@ -454,9 +454,7 @@ pub(super) fn verify(
             Instant::now(),
             &mut memory,
             joins,
-        ) else {
-            return None;
-        };
+        )?;
         let at = if refinement.converged {
             refinement.pose
         } else {
