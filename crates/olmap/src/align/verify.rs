@@ -24,9 +24,9 @@
 //!
 //! Every hypothesis is refined to the ICP schedule's loose first stage (ten times its
 //! epsilons, on the thin source when [`super::icp::IcpParams::coarse_voxel_factor`] asks for
-//! one) and the winner chosen by those fits;
-//! (a rival whose estimate runs into a hypothesis refined before it stops there, as that
-//! hypothesis again: [`JOIN_FRACTION`]);
+//! one; a rival whose estimate runs into a hypothesis refined before it stops there and is
+//! dropped as that hypothesis: [`JOIN_FRACTION`]) and the winner chosen by those fits (a
+//! lone hypothesis needs no choosing: its agreement is counted once, at its final pose);
 //! the winner and the rivals that could be its distinct runner-up are then refined in full
 //! and their agreement counted again at their final poses, so that the uniqueness test
 //! compares fits of one depth (a finished rival that now fits better than the winner makes
@@ -94,13 +94,17 @@ pub const DISTINCT_TRANSLATION_CELLS: f64 = 3.0;
 /// Two refined poses turned by more than this (radians; 3°) are distinct solutions.
 pub const DISTINCT_ROTATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
-/// A rival's thin stage stops, as the same solution as an earlier hypothesis, once its
-/// estimate comes within this fraction of [`DISTINCT_TRANSLATION_CELLS`] and
-/// [`DISTINCT_ROTATION`] of that hypothesis' refined pose (a third: one cell and 1°). From
-/// there its refinement would descend into the earlier one's minimum, and the
-/// verification drops a rival ending within the whole distances of one; stopping early
-/// spares the rest of its iterations (in the live team map, a fifth of all refinement
-/// time went to rivals that ended as an earlier hypothesis).
+/// A rival's thin stage stops, and the rival is dropped as the same solution as an earlier
+/// hypothesis, once its estimate (its start included) comes within this fraction of
+/// [`DISTINCT_TRANSLATION_CELLS`] and [`DISTINCT_ROTATION`] of that hypothesis' pose (a
+/// third: one cell and 1°; the pose is the refined one, or the start of a hypothesis whose
+/// refinement did not converge). From there its refinement almost always descends into the
+/// earlier one's minimum, and the verification drops a rival ending within the whole
+/// distances of one; stopping early spares the rest of its iterations (in the live team
+/// map, a fifth of all refinement time went to rivals that ended as an earlier
+/// hypothesis). Not exact: a rival that passed that close and then ended farther than the
+/// whole distances (or did not converge) was kept before and is dropped now; no result of
+/// the demo or of the live team probe changed.
 pub const JOIN_FRACTION: f64 = 1.0 / 3.0;
 
 /// Where a hypothesis' start came from.

@@ -1041,9 +1041,6 @@ mod tests {
         assert_eq!(res.iterations, 1);
     }
 
-    /// A target prepared once gives every refinement exactly what preparing it again would
-    /// (its normals, computed on first use, depend on the target alone), and refuses a
-    /// refinement with other target parameters.
     /// A refinement given poses to join stops (`None`) once its estimate comes within the
     /// tolerances of one, and is the plain refinement when it never comes near one.
     #[test]
@@ -1099,6 +1096,9 @@ mod tests {
         assert_eq!(strict.pose, plain.pose);
     }
 
+    /// A target prepared once gives every refinement exactly what preparing it again would
+    /// (its normals, computed on first use, depend on the target alone), and refuses a
+    /// refinement with other target parameters.
     #[test]
     fn a_prepared_target_gives_the_same_refinements() {
         let truth = Pose::from_xyz_ypr(0.15, -0.1, 0.02, 0.05, 0.01, 0.0);

@@ -12,8 +12,8 @@
 //! Every placed scan with an odometry prediction leaves its *residual*, the placed pose
 //! against the prediction, here, per odometry frame (robot). Odometry error grows as a
 //! random walk with the moves between the scan predicted from and the scan predicted, so a
-//! residual is kept per move (its square divided by the capture gap) and scaled back by the
-//! next scan's gap. From the last [`RECENT`] residuals of its frame (at least
+//! residual is kept per move (its square divided by the moves: the robot's own scans
+//! between the two) and scaled back by the next scan's moves. From the last [`RECENT`] residuals of its frame (at least
 //! [`MIN_RESIDUALS`]; before that, of every frame) a scan's expected error σ per
 //! horizontal axis and in heading is the RMS; the windows smaller than [`INNER_SIGMAS`] σ in the inner half (or
 //! [`HEADING_SIGMAS`] σ of heading) are skipped. The windows searched keep their sizes and
@@ -38,7 +38,7 @@ pub(super) const INNER_SIGMAS: f64 = 2.0;
 pub(super) const HEADING_SIGMAS: f64 = 2.0;
 
 /// One residual per move: squared horizontal error per axis and squared heading error,
-/// each divided by the moves (capture gap) the prediction spanned.
+/// each divided by the moves the prediction spanned.
 #[derive(Debug, Clone, Copy)]
 struct Residual {
     axis2: f64,
@@ -53,9 +53,9 @@ pub(super) struct OdometryResiduals {
 
 impl OdometryResiduals {
     /// Records the residual of a scan of `frame` placed at `placed` where odometry
-    /// predicted `predicted` over `gap` moves (capture gap, at least 1).
-    pub(super) fn record(&mut self, frame: usize, predicted: &Pose, placed: &Pose, gap: u64) {
-        let moves = gap.max(1) as f64;
+    /// predicted `predicted` over `moves` moves (at least 1).
+    pub(super) fn record(&mut self, frame: usize, predicted: &Pose, placed: &Pose, moves: u64) {
+        let moves = moves.max(1) as f64;
         let d = placed.translation() - predicted.translation();
         let (y0, _, _) = predicted.yaw_pitch_roll();
         let (y1, _, _) = placed.yaw_pitch_roll();
@@ -83,12 +83,12 @@ impl OdometryResiduals {
         self.by_frame.clear();
     }
 
-    /// The expected error of a prediction over `gap` moves in `frame`: σ per horizontal
+    /// The expected error of a prediction over `moves` moves in `frame`: σ per horizontal
     /// axis (metres) and σ of heading (radians), from the frame's residuals when it has
     /// [`MIN_RESIDUALS`], else from every frame's together (a robot's first scans, taken
     /// as the team's robots drive: one team usually shares its odometry); `None` when
     /// fewer are known.
-    pub(super) fn expected(&self, frame: usize, gap: u64) -> Option<(f64, f64)> {
+    pub(super) fn expected(&self, frame: usize, moves: u64) -> Option<(f64, f64)> {
         let own = self
             .by_frame
             .get(frame)
@@ -101,7 +101,7 @@ impl OdometryResiduals {
             return None;
         }
         let n = residuals.len() as f64;
-        let moves = gap.max(1) as f64;
+        let moves = moves.max(1) as f64;
         let axis = (moves * residuals.iter().map(|r| r.axis2).sum::<f64>() / n).sqrt();
         let heading = (moves * residuals.iter().map(|r| r.heading2).sum::<f64>() / n).sqrt();
         Some((axis, heading))

@@ -154,8 +154,24 @@ impl<'a> State<'a> {
     pub(super) fn expected_odometry_error(&self, s: usize) -> Option<(f64, f64)> {
         let residuals = self.residuals.as_ref()?;
         let from = self.predicts_from(s)?;
-        let gap = self.capture[from].abs_diff(self.capture[s]);
-        residuals.expected(self.team.frame[s], gap)
+        residuals.expected(self.team.frame[s], self.moves_between(from, s))
+    }
+
+    /// The moves between scans `a` and `b` of one frame: its scans with odometry captured
+    /// from the one to the other (both included), less one; at least 1. (Another robot's
+    /// scans in between are not its moves.)
+    fn moves_between(&self, a: usize, b: usize) -> u64 {
+        let (ca, cb) = (self.capture[a], self.capture[b]);
+        let (lo, hi) = (ca.min(cb), ca.max(cb));
+        let frame = self.team.frame[a];
+        let n = (0..self.scans.len())
+            .filter(|&i| {
+                self.team.frame[i] == frame
+                    && self.scans[i].odometry.is_some()
+                    && (lo..=hi).contains(&self.capture[i])
+            })
+            .count() as u64;
+        n.saturating_sub(1).max(1)
     }
 
     /// From now on, keeps each placed scan's odometry residual and lets
@@ -307,15 +323,17 @@ impl<'a> State<'a> {
     /// Adds scan `s` at `pose` to the map: its footprint to the map box, its registration
     /// cloud to the search target, its whole cloud to the refinement points.
     pub(super) fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
-        if self.residuals.is_some() {
-            if let (Some(from), Some((predicted, _))) = (self.predicts_from(s), self.predict(s)) {
-                let gap = self.capture[from].abs_diff(self.capture[s]);
-                let frame = self.team.frame[s];
-                if let Some(r) = &mut self.residuals {
-                    r.record(frame, &predicted, &pose, gap);
+        // What odometry predicted, before the scan is placed (kept once it is).
+        let prediction = if self.residuals.is_some() {
+            match (self.predicts_from(s), self.predict(s)) {
+                (Some(from), Some((predicted, _))) => {
+                    Some((predicted, self.moves_between(from, s)))
                 }
+                _ => None,
             }
-        }
+        } else {
+            None
+        };
         // Field by field (not `self.cloud(s)`): the target is changed below.
         let cloud = self.clouds[s].as_ref().unwrap_or(&self.scans[s].cloud);
         if let Some(fp) = footprint(cloud, &pose) {
@@ -327,6 +345,9 @@ impl<'a> State<'a> {
         self.refine_map = OnceLock::new();
         self.refine_prepared = OnceLock::new();
         self.poses[s] = Some(pose);
+        if let (Some(r), Some((predicted, moves))) = (&mut self.residuals, prediction) {
+            r.record(self.team.frame[s], &predicted, &pose, moves);
+        }
         Ok(())
     }
 }
@@ -376,5 +397,13 @@ mod tests {
         assert!((path - (0.3f64.hypot(4.6))).abs() < 1e-9);
         // The path length counts every move between two scans, not their distance.
         assert!((state.path_length(0, 4) - (5.0 + 5.0 + 5.0 + 0.3f64.hypot(4.6))).abs() < 1e-9);
+        // The moves between two scans are their robot's own: four here, two when every
+        // other scan is another robot's (the odometry error of `odometry_error` grows with
+        // them).
+        assert_eq!(state.moves_between(0, 4), 4);
+        assert_eq!(state.moves_between(3, 4), 1);
+        state.team.to_mut().frame = vec![0, 1, 0, 1, 0];
+        assert_eq!(state.moves_between(0, 4), 2);
+        assert_eq!(state.moves_between(4, 2), 1);
     }
 }
