@@ -314,9 +314,9 @@ impl Joins<'_> {
     /// Whether `pose` lies within the tolerances of one of the poses.
     fn joined(&self, pose: &Isometry3<f64>) -> bool {
         self.poses.iter().any(|p| {
-            let d = p.isometry().inverse() * pose;
-            (p.isometry().translation.vector - pose.translation.vector).norm() <= self.translation
-                && d.rotation.angle() <= self.rotation
+            let p = p.isometry();
+            (p.translation.vector - pose.translation.vector).norm() <= self.translation
+                && p.rotation.angle_to(&pose.rotation) <= self.rotation
         })
     }
 }
@@ -354,8 +354,9 @@ pub(crate) fn refine_prepared(
     }
 }
 
-/// [`refine_prepared`] that gives up (`None`) as soon as its estimate comes within the
-/// tolerances of one of `joins`' poses, the start included: a verification's rival that
+/// [`refine_prepared`] that gives up (`None`) as soon as its first stage's estimate (the
+/// thin stage, what [`Depth::Coarse`] runs) comes within the tolerances of one of `joins`'
+/// poses, the start included: a verification's rival that
 /// runs into a hypothesis already refined ends there (its refinement from that point on is
 /// the earlier one's again, and the verification would drop it as the same solution).
 #[allow(clippy::too_many_arguments)]
@@ -401,11 +402,8 @@ pub(crate) fn refine_unless_joining(
                 1.0,
                 budget,
                 fine_cache,
-                joins,
+                Joins::NONE,
             );
-            if s.joined {
-                return None;
-            }
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else if depth == Depth::Full && reserve == 0 {
             let s = schedule(
@@ -417,11 +415,8 @@ pub(crate) fn refine_unless_joining(
                 1.0,
                 params.max_iterations,
                 fine_cache,
-                joins,
+                Joins::NONE,
             );
-            if s.joined {
-                return None;
-            }
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
         } else {
             let (first_src, first_cache) = match thin {
@@ -447,11 +442,16 @@ pub(crate) fn refine_unless_joining(
             if depth == Depth::Full && !first.stopped {
                 let budget = params.max_iterations - iterations;
                 let s = schedule(
-                    &src.fine, tgt, pose, first.d, params, 1.0, budget, fine_cache, joins,
+                    &src.fine,
+                    tgt,
+                    pose,
+                    first.d,
+                    params,
+                    1.0,
+                    budget,
+                    fine_cache,
+                    Joins::NONE,
                 );
-                if s.joined {
-                    return None;
-                }
                 (pose, converged) = (s.pose, s.converged);
                 iterations += s.iterations;
             }

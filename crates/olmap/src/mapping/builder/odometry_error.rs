@@ -22,7 +22,7 @@
 
 use std::collections::VecDeque;
 
-use crate::geometry::Pose;
+use crate::geometry::{wrap_angle, Pose};
 
 /// Residuals kept per frame (the most recent).
 pub(super) const RECENT: usize = 8;
@@ -59,8 +59,7 @@ impl OdometryResiduals {
         let d = placed.translation() - predicted.translation();
         let (y0, _, _) = predicted.yaw_pitch_roll();
         let (y1, _, _) = placed.yaw_pitch_roll();
-        let dy = (y1 - y0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-            - std::f64::consts::PI;
+        let dy = wrap_angle(y1 - y0);
         let r = Residual {
             axis2: 0.5 * (d.x * d.x + d.y * d.y) / moves,
             heading2: dy * dy / moves,

@@ -153,8 +153,13 @@ impl<'a> State<'a> {
     /// `None` unless [`State::learn_odometry_errors`] was called.
     pub(super) fn expected_odometry_error(&self, s: usize) -> Option<(f64, f64)> {
         let residuals = self.residuals.as_ref()?;
-        let from = self.predicts_from(s)?;
-        residuals.expected(self.team.frame[s], self.moves_between(from, s))
+        residuals.expected(self.team.frame[s], self.predicted_moves(s)?)
+    }
+
+    /// The moves odometry predicts scan `s` over: from the placed scan it is predicted
+    /// from ([`State::predicts_from`]).
+    fn predicted_moves(&self, s: usize) -> Option<u64> {
+        Some(self.moves_between(self.predicts_from(s)?, s))
     }
 
     /// The moves between scans `a` and `b` of one frame: its scans with odometry captured
@@ -324,16 +329,10 @@ impl<'a> State<'a> {
     /// cloud to the search target, its whole cloud to the refinement points.
     pub(super) fn place(&mut self, s: usize, pose: Pose) -> Result<()> {
         // What odometry predicted, before the scan is placed (kept once it is).
-        let prediction = if self.residuals.is_some() {
-            match (self.predicts_from(s), self.predict(s)) {
-                (Some(from), Some((predicted, _))) => {
-                    Some((predicted, self.moves_between(from, s)))
-                }
-                _ => None,
-            }
-        } else {
-            None
-        };
+        let prediction = self.residuals.as_ref().and_then(|_| {
+            let (predicted, _) = self.predict(s)?;
+            Some((predicted, self.predicted_moves(s)?))
+        });
         // Field by field (not `self.cloud(s)`): the target is changed below.
         let cloud = self.clouds[s].as_ref().unwrap_or(&self.scans[s].cloud);
         if let Some(fp) = footprint(cloud, &pose) {
