@@ -28,8 +28,10 @@ pub(super) struct Remembered {
     /// The nearest target points then, nearest first (`len` of them).
     items: [u32; CANDIDATES],
     len: u8,
-    /// The distance of the farthest of them (infinite when the tree holds no other
-    /// point; negative: nothing remembered).
+    /// No target point but the kept ones is closer than this to `at`: the distance of the
+    /// farthest kept one when `CANDIDATES` were kept, the query's gate when fewer lay
+    /// within it (none: nothing within the gate), infinite when the tree holds no other
+    /// point; negative: nothing remembered.
     reach: f64,
 }
 
@@ -95,26 +97,35 @@ impl NearestMemory {
     }
 }
 
-/// The nearest target point of `q` and its squared distance (`None` for an empty tree),
-/// from `memo` when the nearest of its kept points is provably the nearest of all, else
-/// from the tree (and remembered).
+/// The nearest target point of `q` within `gate` metres and its squared distance (`None`
+/// when there is none), from `memo` when its kept points prove it (the nearest of them is
+/// the nearest of all, or none of them and no other point is within the gate), else from
+/// the tree (and remembered). The tree is asked only for points within the gate: a source
+/// point far from the map (where the scan sees what the map has not) costs a small search,
+/// not a walk to a distant nearest point, and is then remembered as having nothing near.
 #[inline]
 pub(super) fn nearest(
     tgt: &Target,
     q: &Point3<f64>,
     memo: &mut Remembered,
+    gate: f64,
 ) -> Option<(usize, f64)> {
-    if memo.len > 0 {
+    let gate2 = gate * gate;
+    if memo.reach >= 0.0 {
         let moved = (q - memo.at).norm();
-        let mut best = (memo.items[0] as usize, f64::INFINITY);
+        // Every target point not kept is at least this far from `q`.
+        let floor = memo.reach - moved - MARGIN;
+        let mut best: Option<(usize, f64)> = None;
         for &i in &memo.items[..memo.len as usize] {
             let d2 = (q - tgt.points[i as usize]).norm_squared();
-            if d2 < best.1 {
-                best = (i as usize, d2);
+            if best.is_none_or(|(_, b)| d2 < b) {
+                best = Some((i as usize, d2));
             }
         }
-        if best.1.sqrt() + moved + MARGIN < memo.reach {
-            return Some(best);
+        match best {
+            Some((i, d2)) if d2.sqrt() < floor => return (d2 <= gate2).then_some((i, d2)),
+            _ if floor > gate && best.is_none_or(|(_, d2)| d2 > gate2) => return None,
+            _ => {}
         }
     }
     let found = tgt
@@ -123,26 +134,23 @@ pub(super) fn nearest(
         .nearest_n::<SquaredEuclidean<f64>>(
             std::num::NonZeroUsize::new(CANDIDATES).expect("CANDIDATES > 0"),
         )
+        .within(gate2)
         .execute();
-    let Some(first) = found.first() else {
-        *memo = Remembered::NONE;
-        return None;
-    };
-    if found.iter().any(|r| r.distance.is_nan()) {
+    if found.iter().any(|r| r.distance.is_nan()) || gate.is_nan() {
         *memo = Remembered::NONE;
         return None;
     }
-    // Every target point is kept when the tree holds no more than `CANDIDATES`; otherwise
-    // the farthest kept one bounds all the others, and only a finite bound is kept.
-    let all_kept = tgt.points.len() <= found.len();
-    let reach = if all_kept {
+    // Every target point is kept when the tree holds no more than were found; with fewer
+    // than `CANDIDATES` found, every other point lies beyond the gate; otherwise the
+    // farthest kept one bounds all the others. Only a finite bound is kept.
+    let reach = if tgt.points.len() <= found.len() {
         f64::INFINITY
+    } else if found.len() < CANDIDATES {
+        gate
     } else {
         found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
     };
-    if !(all_kept || reach.is_finite()) {
-        *memo = Remembered::NONE;
-    } else {
+    if reach.is_finite() || tgt.points.len() <= found.len() {
         let mut items = [0; CANDIDATES];
         for (slot, r) in items.iter_mut().zip(&found) {
             *slot = r.item;
@@ -153,9 +161,13 @@ pub(super) fn nearest(
             len: found.len() as u8,
             reach,
         };
+    } else {
+        *memo = Remembered::NONE;
     }
+    let first = found.first()?;
     let i = first.item as usize;
-    Some((i, (q - tgt.points[i]).norm_squared()))
+    let d2 = (q - tgt.points[i]).norm_squared();
+    (d2 <= gate2).then_some((i, d2))
 }
 
 #[cfg(test)]
@@ -215,7 +227,7 @@ mod tests {
             for step in [0.05, 0.02, 0.01, 0.003, 0.001, 0.0003, 0.0001, 0.0001] {
                 q += point(&mut state, step).coords;
                 let before = memo.at;
-                let (i, d2) = nearest(tgt, &q, &mut memo).unwrap();
+                let (i, d2) = nearest(tgt, &q, &mut memo, f64::INFINITY).unwrap();
                 // (The two planes share a line of points: compare distances, not indices.)
                 assert_eq!(d2, (q - tgt.points[brute(&q)]).norm_squared(), "at {q:?}");
                 assert_eq!(d2, (q - tgt.points[i]).norm_squared());
@@ -227,5 +239,69 @@ mod tests {
             }
         }
         assert!(remembered > 200, "{remembered} remembered, {asked} asked");
+    }
+
+    /// With a shrinking gate, as a refinement's correspondence distance shrinks: an answer
+    /// is given exactly when the nearest target point lies within the gate, it is that
+    /// point, and "nothing within the gate" is remembered too (points off the planes,
+    /// far from any target point, stop asking).
+    #[test]
+    fn gated_answers_are_the_nearest_points_within_the_gate() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut points = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let (a, b) = (i as f32 * 0.05, j as f32 * 0.05);
+                points.push(nalgebra::Point3::new(a, b, 0.0));
+            }
+        }
+        let params = IcpParams {
+            target_voxel: 0.0,
+            ..Default::default()
+        };
+        let prepared = IcpTarget::new(&PointCloud::from_points(points), &params).unwrap();
+        let tgt = prepared.inner.as_ref().unwrap();
+        let brute = |q: &Point3<f64>| {
+            tgt.points
+                .iter()
+                .map(|p| (q - p).norm_squared())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let (mut none_remembered, mut found, mut missed) = (0, 0, 0);
+        for _ in 0..300 {
+            // Above and beside the plane, up to 1 m off it.
+            let mut q = point(&mut state, 1.0) + nalgebra::Vector3::new(1.0, 1.0, 0.0);
+            let mut memo = Remembered::NONE;
+            let steps = [0.05, 0.02, 0.01, 0.003, 0.001, 0.0003, 0.0001, 0.0001];
+            let gates = [2.0, 1.4, 0.5, 0.5, 0.3, 0.3, 0.1, 0.02];
+            for (step, gate) in steps.into_iter().zip(gates) {
+                q += point(&mut state, step).coords;
+                let before = memo.at;
+                let truth = brute(&q);
+                match nearest(tgt, &q, &mut memo, gate) {
+                    Some((i, d2)) => {
+                        assert!(
+                            truth <= gate * gate,
+                            "{q:?}: {truth} beyond the gate {gate}"
+                        );
+                        assert_eq!(d2, truth, "at {q:?}");
+                        assert_eq!(d2, (q - tgt.points[i]).norm_squared());
+                        found += 1;
+                    }
+                    None => {
+                        assert!(truth > gate * gate, "{q:?}: {truth} within the gate {gate}");
+                        missed += 1;
+                        if memo.at == before {
+                            none_remembered += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            found > 300 && missed > 300,
+            "{found} found, {missed} missed"
+        );
+        assert!(none_remembered > 100, "{none_remembered} misses remembered");
     }
 }

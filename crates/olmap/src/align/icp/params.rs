@@ -39,6 +39,26 @@ impl RobustKernel {
     }
 }
 
+/// Which target points a PCA normal is estimated from (when the target has no normals of
+/// its own, or [`IcpParams::use_target_normals`] is off).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NormalNeighbourhood {
+    /// The [`IcpParams::normal_k`] nearest target points (a k-d tree query per normal).
+    #[default]
+    Nearest,
+    /// The target points in the 3 × 3 × 3 voxels around the point's own, for a target of
+    /// one point per voxel (downsampled at [`IcpParams::target_voxel`], or a mapper's merged
+    /// map): a hash lookup per voxel instead of a tree query, several times cheaper, over a
+    /// patch about as wide as `normal_k = 10` nearest points at the same spacing (±1.5
+    /// voxels). A point with fewer than 3 points in its block has no normal, so a target
+    /// sparser than its voxel (far surfaces of a single scan) keeps fewer correspondences:
+    /// on the 3DTK pairs at 0.05 m, 4,800-10,600 instead of 14,000-17,700, the poses still
+    /// within the real-data test's bounds (1.3-11.6 cm against 1.3-12.9 cm). Made for a
+    /// dense merged map (many scans' points per voxel). A target that is not one point per
+    /// voxel (`target_voxel` 0 and no merge) uses the nearest points.
+    VoxelBlock,
+}
+
 /// Parameters of [`super::refine`]. All distances are in metres, angles in radians.
 ///
 /// The defaults were chosen on two kinds of real data: outdoor 3D scans (ranges 1.6-74 m,
@@ -76,6 +96,12 @@ pub struct IcpParams {
     pub use_target_normals: bool,
     /// Neighbours (including the point itself) for PCA normals. Default `10`.
     pub normal_k: usize,
+    /// Which target points a PCA normal comes from. Default
+    /// [`NormalNeighbourhood::Nearest`]; the live mapper uses
+    /// [`NormalNeighbourhood::VoxelBlock`] on its 0.1 m map (each placement rebuilds the
+    /// map's target, and estimating the normals it touches was about a fifth of the
+    /// mapping's time).
+    pub normal_neighbourhood: NormalNeighbourhood,
     /// Minimum planarity `(λ1 - λ0) / λ2` of a neighbourhood for its PCA normal to be used, in
     /// `[0, 1]`. Default `0.2`: rejects lines (scan-line fragments, poles) and scattered
     /// clutter (vegetation), keeps walls, ground and the faces of objects.
@@ -140,6 +166,7 @@ impl Default for IcpParams {
             source_max_range: None,
             use_target_normals: true,
             normal_k: 10,
+            normal_neighbourhood: NormalNeighbourhood::Nearest,
             min_planarity: 0.2,
             max_distance_start: 2.0,
             max_distance_end: 0.4,

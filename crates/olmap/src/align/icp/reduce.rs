@@ -105,7 +105,6 @@ pub(super) fn accumulate(
     cache: &mut NearestCache,
 ) -> Acc {
     let (points, centre, radius) = (&src.points, pose * src.centroid, src.radius);
-    let d2 = d * d;
     let scale = params.kernel_scale * d;
     let kernel = params.kernel;
     let partial: Vec<Acc> = points
@@ -115,12 +114,9 @@ pub(super) fn accumulate(
             let mut acc = Acc::zero();
             for (p, memo) in chunk.iter().zip(memos) {
                 let q = pose * p;
-                let Some((i, dist2)) = nearest(tgt, &q, memo) else {
+                let Some((i, _)) = nearest(tgt, &q, memo, d) else {
                     continue;
                 };
-                if dist2 > d2 {
-                    continue;
-                }
                 let n = tgt.normal(i);
                 if n == Vector3::zeros() {
                     continue;

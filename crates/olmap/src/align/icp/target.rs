@@ -7,10 +7,12 @@ use std::sync::OnceLock;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
+use rustc_hash::FxHashMap;
 
-use super::IcpParams;
+use super::{IcpParams, NormalNeighbourhood};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
+use crate::geometry::VoxelKey;
 
 /// The source after filtering, in f64, with its centroid and RMS radius.
 pub(super) struct Source {
@@ -130,6 +132,7 @@ struct Preparation {
     target_voxel: f64,
     use_target_normals: bool,
     normal_k: usize,
+    normal_neighbourhood: NormalNeighbourhood,
     min_planarity: f64,
 }
 
@@ -139,6 +142,7 @@ impl Preparation {
             target_voxel: params.target_voxel,
             use_target_normals: params.use_target_normals,
             normal_k: params.normal_k,
+            normal_neighbourhood: params.normal_neighbourhood,
             min_planarity: params.min_planarity,
         }
     }
@@ -168,8 +172,9 @@ impl IcpTarget {
     }
 
     /// [`IcpTarget::new`] for a cloud that is already one point per voxel of `voxel`
-    /// metres (a [`crate::cloud::VoxelMerge`]'s): when the target voxel is the same, the
-    /// downsampling would change nothing and is skipped.
+    /// metres (a [`crate::cloud::VoxelMerge`]'s): when the target voxel is no coarser, the
+    /// downsampling would change nothing and is skipped (a finer voxel lies inside one of
+    /// the cloud's, so it holds at most that voxel's point).
     pub(crate) fn of_voxel_centroids(
         target: &PointCloud,
         params: &IcpParams,
@@ -203,14 +208,29 @@ impl IcpTarget {
 pub(super) enum Normals {
     /// The cloud's own, unit length (zero where unusable).
     Given(Vec<Vector3<f64>>),
-    /// PCA of the `k` nearest target points, computed on first use (zero where the
+    /// PCA of the point's neighbourhood, computed on first use (zero where the
     /// neighbourhood is not planar enough).
     Estimated {
-        k: NonZeroUsize,
+        neighbourhood: Neighbourhood,
         min_planarity: f64,
         cache: Vec<OnceLock<Vector3<f64>>>,
     },
 }
+
+/// The target points an estimated normal is the PCA of.
+pub(super) enum Neighbourhood {
+    /// The `k` nearest ([`NormalNeighbourhood::Nearest`]).
+    Nearest(NonZeroUsize),
+    /// Those in the 3 × 3 × 3 voxels of `voxel` metres around the point's own
+    /// ([`NormalNeighbourhood::VoxelBlock`]); `cells`: each voxel's point.
+    VoxelBlock {
+        voxel: f64,
+        cells: FxHashMap<VoxelKey, u32>,
+    },
+}
+
+/// Fewest points of a neighbourhood that give a normal.
+const MIN_NORMAL_POINTS: usize = 3;
 
 /// The downsampled target with its normals and k-d tree.
 pub(super) struct Target {
@@ -227,10 +247,14 @@ impl Target {
         params: &IcpParams,
         downsampled_at: Option<f64>,
     ) -> Result<Option<Self>> {
-        let cloud = if params.target_voxel > 0.0 && downsampled_at != Some(params.target_voxel) {
-            Cow::Owned(target.voxel_downsample(params.target_voxel)?)
-        } else {
-            Cow::Borrowed(target)
+        // The voxel the points are one per (none: any number per voxel).
+        let (cloud, one_per) = match downsampled_at {
+            Some(v) if v >= params.target_voxel => (Cow::Borrowed(target), Some(v)),
+            _ if params.target_voxel > 0.0 => (
+                Cow::Owned(target.voxel_downsample(params.target_voxel)?),
+                Some(params.target_voxel),
+            ),
+            _ => (Cow::Borrowed(target), None),
         };
         let given = if params.use_target_normals {
             cloud.normals()
@@ -270,8 +294,18 @@ impl Target {
                     .collect(),
             )
         } else {
+            let neighbourhood = match (params.normal_neighbourhood, one_per) {
+                (NormalNeighbourhood::VoxelBlock, Some(voxel)) => Neighbourhood::VoxelBlock {
+                    voxel,
+                    cells: voxel_cells(&points, voxel),
+                },
+                _ => Neighbourhood::Nearest(
+                    NonZeroUsize::new(params.normal_k.min(points.len()).max(1))
+                        .expect("at least 1"),
+                ),
+            };
             Normals::Estimated {
-                k: NonZeroUsize::new(params.normal_k.min(points.len()).max(1)).expect("at least 1"),
+                neighbourhood,
                 min_planarity: params.min_planarity,
                 cache: (0..points.len()).map(|_| OnceLock::new()).collect(),
             }
@@ -290,37 +324,83 @@ impl Target {
         match &self.normals {
             Normals::Given(n) => n[i],
             Normals::Estimated {
-                k,
+                neighbourhood,
                 min_planarity,
                 cache,
-            } => *cache[i].get_or_init(|| self.estimate_normal(i, *k, *min_planarity)),
+            } => *cache[i].get_or_init(|| self.estimate_normal(i, neighbourhood, *min_planarity)),
         }
     }
 
-    /// PCA normal of target point `i` from its `k` nearest neighbours; zero where the
-    /// neighbourhood is not planar enough.
-    fn estimate_normal(&self, i: usize, k: NonZeroUsize, min_planarity: f64) -> Vector3<f64> {
+    /// PCA normal of target point `i` from its neighbourhood; zero where the neighbourhood
+    /// has fewer than [`MIN_NORMAL_POINTS`] points or is not planar enough.
+    fn estimate_normal(
+        &self,
+        i: usize,
+        neighbourhood: &Neighbourhood,
+        min_planarity: f64,
+    ) -> Vector3<f64> {
         let c = self.points[i];
-        let nn = self
-            .tree
-            .query(&[c.x, c.y, c.z])
-            .nearest_n::<SquaredEuclidean<f64>>(k)
-            .execute();
-        if nn.len() < 3 {
+        // The `k` nearest points as they are, or a block's (at most 27) relative to the
+        // point itself (precision far from the origin).
+        let mut near: Vec<Vector3<f64>> = Vec::with_capacity(28);
+        match neighbourhood {
+            Neighbourhood::Nearest(k) => {
+                let nn = self
+                    .tree
+                    .query(&[c.x, c.y, c.z])
+                    .nearest_n::<SquaredEuclidean<f64>>(*k)
+                    .execute();
+                near.extend(nn.iter().map(|r| self.points[r.item as usize].coords));
+            }
+            Neighbourhood::VoxelBlock { voxel, cells } => {
+                let Some(key) = VoxelKey::from_point(&c, *voxel) else {
+                    return Vector3::zeros();
+                };
+                // The point itself even where rounding put it in a neighbour's voxel.
+                near.push(Vector3::zeros());
+                for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for dz in -1..=1 {
+                            let k = VoxelKey::new(
+                                key.x.saturating_add(dx),
+                                key.y.saturating_add(dy),
+                                key.z.saturating_add(dz),
+                            );
+                            if let Some(&j) = cells.get(&k) {
+                                if j as usize != i {
+                                    near.push(self.points[j as usize] - c);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if near.len() < MIN_NORMAL_POINTS {
             return Vector3::zeros();
         }
-        let mut mean = Vector3::zeros();
-        for r in &nn {
-            mean += self.points[r.item as usize].coords;
-        }
-        mean /= nn.len() as f64;
+        let n = near.len() as f64;
+        let mean = near.iter().sum::<Vector3<f64>>() / n;
         let mut cov = Matrix3::zeros();
-        for r in &nn {
-            let d = self.points[r.item as usize].coords - mean;
+        for d in &near {
+            let d = d - mean;
             cov += d * d.transpose();
         }
-        plane_normal(&(cov / nn.len() as f64), min_planarity)
+        plane_normal(&(cov / n), min_planarity)
     }
+}
+
+/// Each voxel's point (of `voxel` metres; points are one per voxel, the first kept where
+/// rounding put two in one).
+fn voxel_cells(points: &[Point3<f64>], voxel: f64) -> FxHashMap<VoxelKey, u32> {
+    let mut cells = FxHashMap::default();
+    cells.reserve(points.len());
+    for (i, p) in points.iter().enumerate() {
+        if let Some(k) = VoxelKey::from_point(p, voxel) {
+            cells.entry(k).or_insert(i as u32);
+        }
+    }
+    cells
 }
 
 /// The unit normal of a covariance matrix (eigenvector of the smallest eigenvalue), or zero
@@ -341,5 +421,111 @@ pub(super) fn plane_normal(cov: &Matrix3<f64>, min_planarity: f64) -> Vector3<f6
         n / len
     } else {
         Vector3::zeros()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::VoxelMerge;
+    use crate::geometry::Pose;
+
+    /// A floor and a wall, every 10 cm, and a point alone far from both.
+    fn floor_wall_and_a_stray() -> PointCloud {
+        let mut points = Vec::new();
+        for i in 0..20 {
+            for j in 0..20 {
+                let (a, b) = (0.05 + i as f32 * 0.1, 0.05 + j as f32 * 0.1);
+                points.push(Point3::new(a, b + 0.1, 0.05));
+                points.push(Point3::new(a, 0.05, b));
+            }
+        }
+        points.push(Point3::new(5.05, 5.05, 5.05));
+        PointCloud::from_points(points)
+    }
+
+    /// Block normals: the floor's point up, the wall's across, none for the stray point
+    /// (fewer than three points in its block) nor where floor meets wall (not a plane).
+    #[test]
+    fn voxel_block_normals_follow_the_surfaces() {
+        let cloud = floor_wall_and_a_stray();
+        let params = IcpParams {
+            normal_neighbourhood: NormalNeighbourhood::VoxelBlock,
+            ..Default::default()
+        };
+        let prepared = IcpTarget::of_voxel_centroids(&cloud, &params, 0.1).unwrap();
+        let t = prepared.inner.as_ref().unwrap();
+        assert!(matches!(
+            &t.normals,
+            Normals::Estimated {
+                neighbourhood: Neighbourhood::VoxelBlock { .. },
+                ..
+            }
+        ));
+        let index_of = |p: Point3<f64>| t.points.iter().position(|q| (q - p).norm() < 1e-6);
+        let floor = index_of(Point3::new(1.05, 1.15, 0.05)).unwrap();
+        let wall = index_of(Point3::new(1.05, 0.05, 1.05)).unwrap();
+        let stray = index_of(Point3::new(5.05, 5.05, 5.05)).unwrap();
+        assert!(t.normal(floor).z.abs() > 0.999, "{}", t.normal(floor));
+        assert!(t.normal(wall).y.abs() > 0.999, "{}", t.normal(wall));
+        assert_eq!(t.normal(stray), Vector3::zeros());
+        // On the line where the floor meets the wall the block holds both: no plane.
+        let corner = index_of(Point3::new(1.05, 0.15, 0.05)).unwrap();
+        let n = t.normal(corner);
+        assert!(
+            n == Vector3::zeros() || n.z.abs() < 0.999 && n.y.abs() < 0.999,
+            "{n}"
+        );
+    }
+
+    /// A target that is not one point per voxel (no downsampling) takes the nearest
+    /// points whatever was asked.
+    #[test]
+    fn voxel_block_needs_a_voxelised_target() {
+        let params = IcpParams {
+            target_voxel: 0.0,
+            normal_neighbourhood: NormalNeighbourhood::VoxelBlock,
+            ..Default::default()
+        };
+        let prepared = IcpTarget::new(&floor_wall_and_a_stray(), &params).unwrap();
+        let t = prepared.inner.as_ref().unwrap();
+        assert!(matches!(
+            &t.normals,
+            Normals::Estimated {
+                neighbourhood: Neighbourhood::Nearest(_),
+                ..
+            }
+        ));
+    }
+
+    /// Downsampling a merge's centroids at a finer voxel changes nothing (each finer voxel
+    /// lies inside one of the merge's): what lets a map merged at 0.1 m skip the 0.05 m
+    /// downsampling of the ICP target.
+    #[test]
+    fn centroids_downsampled_finer_are_unchanged() {
+        let mut merge = VoxelMerge::new(0.1).unwrap();
+        let mut state = 0x1234_5678_9ABC_DEF1u64;
+        let mut u = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let points: Vec<Point3<f32>> = (0..20_000)
+            .map(|_| Point3::new(u() * 6.0 - 3.0, u() * 6.0 - 3.0, u() * 2.0).cast::<f32>())
+            .collect();
+        merge
+            .add(&PointCloud::from_points(points), &Pose::identity())
+            .unwrap();
+        let cloud = merge.cloud();
+        let finer = cloud.voxel_downsample(0.05).unwrap();
+        assert_eq!(finer.points(), cloud.points());
+        let params = IcpParams::default();
+        let skipped = IcpTarget::of_voxel_centroids(&cloud, &params, 0.1).unwrap();
+        let downsampled = IcpTarget::new(&cloud, &params).unwrap();
+        assert_eq!(
+            skipped.inner.as_ref().unwrap().points,
+            downsampled.inner.as_ref().unwrap().points
+        );
     }
 }
