@@ -292,3 +292,40 @@ fn a_robot_replays_a_ros2_bag_and_maps_it() {
     assert!((last.time - 1_600_000_021.0).abs() < 1e-6);
     assert!(last.odometry.is_some());
 }
+
+/// `olmap bench --net --quick` (three robots, three stops, robots and mapper in one process
+/// on loopback): every record placed, the seed asked for, occupancy lists within the
+/// issue's 50 KB per scan and far smaller than the raw clouds, latency figures in order
+/// (the scans placed on arrival are some of all the placed scans). `--seed` without
+/// `--trust` or `--net` is refused.
+#[test]
+fn bench_net_reports_its_figures() {
+    let out = olmap(&["bench", "--net", "--quick", "--seed", "1", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["seed"], 1);
+    assert_eq!(v["published"], 9);
+    assert_eq!(v["placed"], 9);
+    let list = v["list_bytes_per_scan"].as_f64().unwrap();
+    assert!(list > 0.0 && list <= 50_000.0, "{list} bytes per scan");
+    assert!(v["raw_bytes_per_scan"].as_f64().unwrap() > 5.0 * list);
+    let ms = |k: &str| -> Vec<f64> {
+        v[k].as_array()
+            .unwrap_or_else(|| panic!("{k}: {}", v[k]))
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (all, arrival) = (ms("latency_ms"), ms("arrival_latency_ms"));
+    assert!(0.0 < all[0] && all[0] <= all[1] && all[1] <= all[2], "{all:?}");
+    assert!(arrival[0] <= arrival[1] && arrival[1] <= arrival[2], "{arrival:?}");
+    assert!(arrival[2] <= all[2], "{arrival:?} {all:?}");
+
+    let refused = olmap(&["bench", "--seed", "3"]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--seed"));
+}

@@ -69,6 +69,8 @@ pub struct NetBenchReport {
     pub resolution: f64,
     /// Whether the robots published out of step ([`NetBenchOptions::staggered`]).
     pub staggered: bool,
+    /// The simulator's seed.
+    pub seed: u64,
     /// Mean bytes of a record payload carrying the raw cloud.
     pub raw_bytes_per_scan: f64,
     /// Mean bytes of a record payload carrying the occupancy list (what is sent).
@@ -88,6 +90,9 @@ pub struct NetBenchReport {
     pub published: u64,
     /// Publish→placement latency, ms: p50, p95, max.
     pub latency_ms: Option<[f64; 3]>,
+    /// The same over the scans placed when their record arrived (not those that waited
+    /// for a sighting or for the map to reach them), ms: p50, p95, max.
+    pub arrival_latency_ms: Option<[f64; 3]>,
     /// Live map updates (records given, waiting scans placed).
     pub map_runs: u64,
     /// Seconds from the first publish until every scan was placed (or the timeout).
@@ -253,6 +258,7 @@ pub fn run_net_bench(
         rate: opts.rate,
         resolution: opts.resolution,
         staggered: opts.staggered,
+        seed: opts.seed,
         raw_bytes_per_scan: raw_bytes as f64 / n,
         list_bytes_per_scan: list_bytes as f64 / n,
         list_bytes_max: list_max,
@@ -262,6 +268,7 @@ pub fn run_net_bench(
         placed: status.placed,
         published,
         latency_ms: status.latency_ms,
+        arrival_latency_ms: status.arrival_latency_ms,
         map_runs: status.map_runs,
         wall_s: wall,
         peak_rss_mib: peak,

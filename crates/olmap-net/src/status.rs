@@ -73,6 +73,10 @@ pub struct NodeStatus {
     /// Publish→placement latency of the last placed scans, milliseconds: p50, p95, max
     /// (mappers; over every scan whose publish time is known).
     pub latency_ms: Option<[f64; 3]>,
+    /// The same over the scans placed when their record arrived, not after waiting for the
+    /// map to reach them (a robot no sighting ties to the map yet waits for seconds):
+    /// what the mapper's own speed gives (mappers).
+    pub arrival_latency_ms: Option<[f64; 3]>,
     /// The node's counters.
     pub counters: Counters,
 }

@@ -36,9 +36,10 @@ pub struct BenchArgs {
     /// Trust suite: pairs per kind of scene (14 kinds; default 17, 238 pairs).
     #[arg(long, default_value_t = 17, requires = "trust")]
     pub pairs_per_scene: usize,
-    /// Trust suite: the seed of the pairs (default 1).
-    #[arg(long, default_value_t = 1, requires = "trust")]
-    pub seed: u64,
+    /// Trust suite and network figures: the seed of the simulated pairs or team (default 1;
+    /// only with --trust or --net).
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Run the network figures instead (needs the `net` feature): bytes on the wire per
     /// scan (occupancy list at 0.1 m against the raw cloud), publish→placement latency
     /// with the demo's 4 robots publishing 10 stops at 1 stop/s each to a mapper over
@@ -73,7 +74,7 @@ fn run_trust(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("--pairs-per-scene must be at least 1");
     }
     let options = TrustOptions {
-        seed: a.seed,
+        seed: a.seed.unwrap_or(1),
         per_scene: a.pairs_per_scene,
         ..Default::default()
     };
@@ -129,6 +130,9 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     }
     if a.net {
         return run_net(a);
+    }
+    if a.seed.is_some() {
+        anyhow::bail!("--seed is for the trust suite (--trust) or the network figures (--net)");
     }
     let count = olmap::limits::thread_count(a.threads);
     if let Some(note) = count.note() {
@@ -263,6 +267,7 @@ fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         opts.stops = 3;
     }
     opts.staggered = a.staggered;
+    opts.seed = a.seed.unwrap_or(opts.seed);
     let json = a.json;
     let r = olmap_net::bench::run_net_bench(&opts, |stage| {
         if !json {
@@ -275,7 +280,7 @@ fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     }
     let kb = |b: f64| b / 1024.0;
     println!(
-        "{} robots x {} stops at {} stop/s each ({}), occupancy lists at {} m, loopback",
+        "{} robots x {} stops at {} stop/s each ({}), occupancy lists at {} m, loopback, seed {}",
         r.robots,
         r.stops,
         r.rate,
@@ -284,7 +289,8 @@ fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         } else {
             "all in the same instant"
         },
-        r.resolution
+        r.resolution,
+        r.seed
     );
     println!(
         "  bytes per scan: occupancy list {:.1} KiB (max {:.1}), raw cloud {:.1} KiB: {:.1}x less ({:.0} -> {:.0} points)",
@@ -301,6 +307,11 @@ fn run_net(a: &BenchArgs) -> anyhow::Result<ExitCode> {
             r.map_runs
         ),
         None => println!("  no scan placed: no latency"),
+    }
+    if let Some([p50, p95, max]) = r.arrival_latency_ms {
+        println!(
+            "  of scans placed when their record arrived (not after waiting for the map to reach them): p50 {p50:.0} ms, p95 {p95:.0} ms, max {max:.0} ms"
+        );
     }
     println!(
         "  placed {}/{} scans in {:.1} s",

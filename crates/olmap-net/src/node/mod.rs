@@ -53,6 +53,9 @@ pub struct MapFigures {
     pub mapped_records: u64,
     /// Publish→placement latency of placed scans, ms: p50, p95, max.
     pub latency_ms: Option<[f64; 3]>,
+    /// The same of the scans placed when their record arrived (not those that waited for
+    /// the map to reach them), ms: p50, p95, max.
+    pub arrival_latency_ms: Option<[f64; 3]>,
 }
 
 /// State shared between a node's threads and Zenoh's callbacks.
@@ -411,6 +414,7 @@ impl Shared {
             map_runs: figures.as_ref().map_or(0, |f| f.runs),
             mapped_records: figures.as_ref().map_or(0, |f| f.mapped_records),
             latency_ms: figures.as_ref().and_then(|f| f.latency_ms),
+            arrival_latency_ms: figures.as_ref().and_then(|f| f.arrival_latency_ms),
             counters: lock(&self.counters).clone(),
         }
     }
