@@ -47,8 +47,8 @@ use std::time::Instant;
 
 use super::consistency::{consistency_seen, source_view, Consistency, QuickFit};
 use super::icp::{
-    refine_prepared, refine_unless_joining, Depth, IcpParams, IcpResult, IcpSource, IcpTarget,
-    Joins, NearestMemory,
+    finish_coarse, refine_unless_joining, Depth, IcpParams, IcpResult, IcpSource, IcpTarget, Joins,
+    NearestMemory,
 };
 use super::lattice::{distinct, Alignment, Candidate};
 use super::params::{Dof, Region, SearchMode, SearchParams};
@@ -587,33 +587,8 @@ pub(super) fn verify(
         let h = &mut hypotheses[i];
         let memory = &mut memories[i];
         let prepared = targets[i];
-        let full = if h.refinement.converged {
-            // Where the thin stage left it: together, what `refine` does from the start.
-            let mut f = refine_prepared(
-                &thin,
-                prepared,
-                &h.refinement.pose,
-                icp,
-                Depth::Finish,
-                h.refinement.iterations,
-                Instant::now(),
-                memory,
-            );
-            f.iterations += h.refinement.iterations;
-            f.seconds += h.refinement.seconds;
-            f
-        } else {
-            refine_prepared(
-                &thin,
-                prepared,
-                &h.start.pose,
-                icp,
-                Depth::Full,
-                0,
-                Instant::now(),
-                memory,
-            )
-        };
+        // Where the thin stage left it, finished: what `refine` does from the start.
+        let full = finish_coarse(&thin, prepared, &h.start.pose, &h.refinement, icp, memory);
         let moved = (full.pose, full.converged) != (h.refinement.pose, h.refinement.converged);
         h.refinement = full;
         if moved || deferred {

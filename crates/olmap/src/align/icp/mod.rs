@@ -152,6 +152,17 @@ pub struct IcpResult {
     pub inliers: usize,
     /// Wall-clock time of the call, seconds (preprocessing included).
     pub seconds: f64,
+    /// Where its last run of the schedule ended: what [`finish_coarse`] resumes from.
+    pub(crate) ended: StageEnd,
+}
+
+/// Where a run of the schedule ended ([`IcpResult::ended`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct StageEnd {
+    /// The correspondence distance reached, metres.
+    d: f64,
+    /// Ended by too few correspondences or unsolvable normal equations.
+    stopped: bool,
 }
 
 /// Refines `T_target_source` by robust point-to-plane ICP, starting from `initial`.
@@ -246,7 +257,7 @@ fn check_initial(initial: &Pose) -> Result<()> {
 }
 
 /// How far [`refine_prepared`] goes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Depth {
     /// The thin stage (when the source has one), then the full source: [`refine`].
     Full,
@@ -257,6 +268,10 @@ pub(crate) enum Depth {
     /// The full source alone from the final distance: what [`Depth::Full`] adds to a
     /// converged [`Depth::Coarse`] result (start from its pose).
     Finish,
+    /// The full source alone from distance `d` with the full epsilons: what [`Depth::Full`]
+    /// adds to an unconverged [`Depth::Coarse`] result of a source with no thin stage, that
+    /// ended at `d` (start from its pose; see [`finish_coarse`]).
+    Resume(f64),
 }
 
 /// Extrapolation of a steady run of steps (see [`schedule`]): consecutive Gauss-Newton
@@ -375,6 +390,11 @@ pub(crate) fn refine_unless_joining(
     let mut pose = *initial.isometry();
     let mut converged = false;
     let mut iterations = 0;
+    // Nothing to resume when no schedule runs (no target or no source point).
+    let mut ended = StageEnd {
+        d: params.max_distance_start,
+        stopped: true,
+    };
     let thin = src.coarse.as_ref();
     // Each source remembers its points' nearest target points from pass to pass.
     memory.fit(src, tgt.map_or(0, |t| t.points.len()));
@@ -391,13 +411,17 @@ pub(crate) fn refine_unless_joining(
     // than five iterations there is no thin stage).
     let reserve = params.max_iterations / 5;
     if let (Some(tgt), false) = (tgt, src.fine.points.is_empty()) {
-        if depth == Depth::Finish {
+        if let Depth::Finish | Depth::Resume(_) = depth {
             let budget = params.max_iterations.saturating_sub(spent).max(1);
+            let from = match depth {
+                Depth::Resume(d) => d,
+                _ => params.max_distance_end,
+            };
             let s = schedule(
                 &src.fine,
                 tgt,
                 pose,
-                params.max_distance_end,
+                from,
                 params,
                 1.0,
                 budget,
@@ -405,6 +429,7 @@ pub(crate) fn refine_unless_joining(
                 Joins::NONE,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
+            ended = s.end();
         } else if depth == Depth::Full && reserve == 0 {
             let s = schedule(
                 &src.fine,
@@ -418,6 +443,7 @@ pub(crate) fn refine_unless_joining(
                 Joins::NONE,
             );
             (pose, converged, iterations) = (s.pose, s.converged, s.iterations);
+            ended = s.end();
         } else {
             let (first_src, first_cache) = match thin {
                 Some(t) => (t, &mut *thin_cache),
@@ -438,6 +464,7 @@ pub(crate) fn refine_unless_joining(
                 return None;
             }
             (pose, converged, iterations) = (first.pose, first.converged, first.iterations);
+            ended = first.end();
             // A first stage that found too few correspondences (or no solution) ends it.
             if depth == Depth::Full && !first.stopped {
                 let budget = params.max_iterations - iterations;
@@ -453,6 +480,7 @@ pub(crate) fn refine_unless_joining(
                     Joins::NONE,
                 );
                 (pose, converged) = (s.pose, s.converged);
+                ended = s.end();
                 iterations += s.iterations;
             }
         }
@@ -483,7 +511,69 @@ pub(crate) fn refine_unless_joining(
         hessian,
         inliers,
         seconds: started.elapsed().as_secs_f64(),
+        ended,
     })
+}
+
+/// What [`Depth::Full`] from `initial` gives, from `coarse`, the [`Depth::Coarse`] result
+/// from `initial` that `memory` was used for: a converged one is finished on the full
+/// source from its pose ([`Depth::Finish`]); an unconverged one of a source with no thin
+/// stage is where the full refinement's first stage ends too (the same source, start and
+/// schedule), so it is resumed from there ([`Depth::Resume`]; one that stopped for lack of
+/// correspondences is the full result already); otherwise the full refinement runs from
+/// `initial`. The same result as [`Depth::Full`] from the start, without running the
+/// first stage twice (an unconverged rival of a verification ran 50 iterations twice).
+pub(crate) fn finish_coarse(
+    src: &IcpSource,
+    target: &IcpTarget,
+    initial: &Pose,
+    coarse: &IcpResult,
+    params: &IcpParams,
+    memory: &mut NearestMemory,
+) -> IcpResult {
+    let started = Instant::now();
+    // With fewer than five iterations `Depth::Full` has one stage at the full epsilons.
+    let staged = params.max_iterations / 5 > 0;
+    let resume = match (coarse.converged, src.coarse.is_none() && staged) {
+        (true, _) => Depth::Finish,
+        (false, true) if coarse.ended.stopped => return coarse.clone(),
+        (false, true) => Depth::Resume(coarse.ended.d),
+        (false, false) => {
+            return refine_prepared(
+                src,
+                target,
+                initial,
+                params,
+                Depth::Full,
+                0,
+                started,
+                memory,
+            )
+        }
+    };
+    let mut f = refine_prepared(
+        src,
+        target,
+        &coarse.pose,
+        params,
+        resume,
+        coarse.iterations,
+        started,
+        memory,
+    );
+    f.iterations += coarse.iterations;
+    f.seconds += coarse.seconds;
+    f
+}
+
+impl Settled {
+    /// Where it ended, for [`IcpResult::ended`].
+    fn end(&self) -> StageEnd {
+        StageEnd {
+            d: self.d,
+            stopped: self.stopped,
+        }
+    }
 }
 
 /// Where a run of the schedule ended.
@@ -1176,6 +1266,77 @@ mod tests {
         );
         assert!(a.pose.rotation().angle_to(&b.pose.rotation()) < 1e-4);
         assert!((a.pose.translation() - truth.translation()).norm() < 0.01);
+    }
+
+    /// Finishing a first stage ([`finish_coarse`]) gives what the full refinement from the
+    /// start gives, to the bit: converged first stages (finished), unconverged ones of a
+    /// source with no thin stage (resumed), ones that stopped (no overlap), and with a thin
+    /// source (refined again from the start).
+    #[test]
+    fn finishing_a_first_stage_is_the_full_refinement() {
+        let truth = Pose::from_xyz_ypr(0.3, -0.25, 0.2, deg(5.0), deg(-5.0), deg(4.0));
+        let (source, target) = scene_pair(&structured_scene(), &truth, 0.01, 5);
+        let far = source.transformed(&Pose::from_xyz_ypr(60.0, 0.0, 0.0, 0.0, 0.0, 0.0));
+        let same = |a: &IcpResult, b: &IcpResult| {
+            (
+                a.pose,
+                a.converged,
+                a.iterations,
+                a.correspondences,
+                a.inliers,
+            ) == (
+                b.pose,
+                b.converged,
+                b.iterations,
+                b.correspondences,
+                b.inliers,
+            ) && (a.inlier_rms, a.hessian, &a.degeneracy)
+                == (b.inlier_rms, b.hessian, &b.degeneracy)
+        };
+        let mut kinds = (0, 0, 0);
+        for (cloud, max_iterations, factor) in [
+            (&source, 50, 1.0),
+            (&source, 12, 1.0),
+            (&source, 6, 1.0),
+            (&far, 50, 1.0),
+            (&source, 12, 3.0),
+        ] {
+            let params = IcpParams {
+                max_iterations,
+                coarse_voxel_factor: factor,
+                ..Default::default()
+            };
+            let src = IcpSource::new(cloud, &params).unwrap();
+            let tgt = IcpTarget::new(&target, &params).unwrap();
+            let run = |depth: Depth, memory: &mut NearestMemory| {
+                refine_prepared(
+                    &src,
+                    &tgt,
+                    &Pose::identity(),
+                    &params,
+                    depth,
+                    0,
+                    Instant::now(),
+                    memory,
+                )
+            };
+            let mut memory = NearestMemory::new(&src);
+            let coarse = run(Depth::Coarse, &mut memory);
+            let finished =
+                finish_coarse(&src, &tgt, &Pose::identity(), &coarse, &params, &mut memory);
+            let full = run(Depth::Full, &mut NearestMemory::new(&src));
+            assert!(
+                same(&finished, &full),
+                "{max_iterations} {factor}: {finished:?}\n{full:?}"
+            );
+            match (coarse.converged, coarse.ended.stopped) {
+                (true, _) => kinds.0 += 1,
+                (false, false) => kinds.1 += 1,
+                (false, true) => kinds.2 += 1,
+            }
+        }
+        // Each way of finishing was taken.
+        assert!(kinds.0 > 0 && kinds.1 > 0 && kinds.2 > 0, "{kinds:?}");
     }
 
     #[test]
