@@ -321,8 +321,14 @@ fn bench_net_reports_its_figures() {
             .collect()
     };
     let (all, arrival) = (ms("latency_ms"), ms("arrival_latency_ms"));
-    assert!(0.0 < all[0] && all[0] <= all[1] && all[1] <= all[2], "{all:?}");
-    assert!(arrival[0] <= arrival[1] && arrival[1] <= arrival[2], "{arrival:?}");
+    assert!(
+        0.0 < all[0] && all[0] <= all[1] && all[1] <= all[2],
+        "{all:?}"
+    );
+    assert!(
+        arrival[0] <= arrival[1] && arrival[1] <= arrival[2],
+        "{arrival:?}"
+    );
     assert!(arrival[2] <= all[2], "{arrival:?} {all:?}");
 
     let refused = olmap(&["bench", "--seed", "3"]);
