@@ -187,6 +187,15 @@ mod tests {
         Point3::new(u() * s, u() * s, u() * s)
     }
 
+    /// `points` prepared as an ICP target, every one kept.
+    fn every_point(points: Vec<nalgebra::Point3<f32>>) -> IcpTarget {
+        let params = IcpParams {
+            target_voxel: 0.0,
+            ..Default::default()
+        };
+        IcpTarget::new(&PointCloud::from_points(points), &params).unwrap()
+    }
+
     /// Points walking in small random steps: every answer, remembered or asked, is as near
     /// as the nearest target point a scan of all of them finds, and many answers are
     /// remembered.
@@ -205,11 +214,7 @@ mod tests {
         for _ in 0..300 {
             points.push(point(&mut state, 1.0).cast::<f32>());
         }
-        let params = IcpParams {
-            target_voxel: 0.0,
-            ..Default::default()
-        };
-        let prepared = IcpTarget::new(&PointCloud::from_points(points), &params).unwrap();
+        let prepared = every_point(points);
         let tgt = prepared.inner.as_ref().unwrap();
         let brute = |q: &Point3<f64>| {
             (0..tgt.points.len())
@@ -255,11 +260,7 @@ mod tests {
                 points.push(nalgebra::Point3::new(a, b, 0.0));
             }
         }
-        let params = IcpParams {
-            target_voxel: 0.0,
-            ..Default::default()
-        };
-        let prepared = IcpTarget::new(&PointCloud::from_points(points), &params).unwrap();
+        let prepared = every_point(points);
         let tgt = prepared.inner.as_ref().unwrap();
         let brute = |q: &Point3<f64>| {
             tgt.points
