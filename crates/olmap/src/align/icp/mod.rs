@@ -521,8 +521,11 @@ pub(crate) fn refine_unless_joining(
 /// stage is where the full refinement's first stage ends too (the same source, start and
 /// schedule), so it is resumed from there ([`Depth::Resume`]; one that stopped for lack of
 /// correspondences is the full result already); otherwise the full refinement runs from
-/// `initial`. The same result as [`Depth::Full`] from the start, without running the
-/// first stage twice (an unconverged rival of a verification ran 50 iterations twice).
+/// `initial` (also with fewer than five iterations in all, when `Depth::Full` has a single
+/// stage). The same result as [`Depth::Full`] from the start (up to which of two target
+/// points exactly equidistant from a source point is taken: the memory differs), without
+/// running the first stage twice (an unconverged rival of a verification ran 40 + 50
+/// iterations).
 pub(crate) fn finish_coarse(
     src: &IcpSource,
     target: &IcpTarget,
@@ -532,13 +535,14 @@ pub(crate) fn finish_coarse(
     memory: &mut NearestMemory,
 ) -> IcpResult {
     let started = Instant::now();
-    // With fewer than five iterations `Depth::Full` has one stage at the full epsilons.
+    // With fewer than five iterations `Depth::Full` has one stage at the full epsilons:
+    // nothing of a first stage carries over.
     let staged = params.max_iterations / 5 > 0;
-    let resume = match (coarse.converged, src.coarse.is_none() && staged) {
-        (true, _) => Depth::Finish,
-        (false, true) if coarse.ended.stopped => return coarse.clone(),
-        (false, true) => Depth::Resume(coarse.ended.d),
-        (false, false) => {
+    let resume = match (coarse.converged, src.coarse.is_none()) {
+        (true, _) if staged => Depth::Finish,
+        (false, true) if staged && coarse.ended.stopped => return coarse.clone(),
+        (false, true) if staged => Depth::Resume(coarse.ended.d),
+        _ => {
             return refine_prepared(
                 src,
                 target,
@@ -1270,8 +1274,9 @@ mod tests {
 
     /// Finishing a first stage ([`finish_coarse`]) gives what the full refinement from the
     /// start gives, to the bit: converged first stages (finished), unconverged ones of a
-    /// source with no thin stage (resumed), ones that stopped (no overlap), and with a thin
-    /// source (refined again from the start).
+    /// source with no thin stage (resumed), ones that stopped (no overlap), with a thin
+    /// source (refined again from the start), and with four iterations in all (a single
+    /// stage).
     #[test]
     fn finishing_a_first_stage_is_the_full_refinement() {
         let truth = Pose::from_xyz_ypr(0.3, -0.25, 0.2, deg(5.0), deg(-5.0), deg(4.0));
@@ -1293,16 +1298,22 @@ mod tests {
             ) && (a.inlier_rms, a.hessian, &a.degeneracy)
                 == (b.inlier_rms, b.hessian, &b.degeneracy)
         };
-        let mut kinds = (0, 0, 0);
-        for (cloud, max_iterations, factor) in [
-            (&source, 50, 1.0),
-            (&source, 12, 1.0),
-            (&source, 6, 1.0),
-            (&far, 50, 1.0),
-            (&source, 12, 3.0),
+        // Already aligned, from the final distance: a first stage that converges within
+        // four iterations (where the full refinement has a single stage).
+        let aligned = source.transformed(&truth);
+        let (mut kinds, mut single) = ((0, 0, 0), 0);
+        for (cloud, max_iterations, factor, start) in [
+            (&source, 50, 1.0, 2.0),
+            (&source, 12, 1.0, 2.0),
+            (&source, 6, 1.0, 2.0),
+            (&source, 4, 1.0, 2.0),
+            (&aligned, 4, 1.0, 0.4),
+            (&far, 50, 1.0, 2.0),
+            (&source, 12, 3.0, 2.0),
         ] {
             let params = IcpParams {
                 max_iterations,
+                max_distance_start: start,
                 coarse_voxel_factor: factor,
                 ..Default::default()
             };
@@ -1330,6 +1341,7 @@ mod tests {
                 "{max_iterations} {factor}: {finished:?}\n{full:?}"
             );
             match (coarse.converged, coarse.ended.stopped) {
+                (true, _) if max_iterations < 5 => single += 1,
                 (true, _) => kinds.0 += 1,
                 (false, false) => kinds.1 += 1,
                 (false, true) => kinds.2 += 1,
@@ -1337,6 +1349,7 @@ mod tests {
         }
         // Each way of finishing was taken.
         assert!(kinds.0 > 0 && kinds.1 > 0 && kinds.2 > 0, "{kinds:?}");
+        assert_eq!(single, 1);
     }
 
     #[test]

@@ -172,9 +172,10 @@ impl IcpTarget {
     }
 
     /// [`IcpTarget::new`] for a cloud that is already one point per voxel of `voxel`
-    /// metres (a [`crate::cloud::VoxelMerge`]'s): when the target voxel is no coarser, the
-    /// downsampling would change nothing and is skipped (a finer voxel lies inside one of
-    /// the cloud's, so it holds at most that voxel's point).
+    /// metres (a [`crate::cloud::VoxelMerge`]'s): when the target voxel is the same or
+    /// divides it a whole number of times, the downsampling would change nothing and is
+    /// skipped (each finer voxel lies inside one of the cloud's, so it holds at most that
+    /// voxel's point).
     pub(crate) fn of_voxel_centroids(
         target: &PointCloud,
         params: &IcpParams,
@@ -249,7 +250,7 @@ impl Target {
     ) -> Result<Option<Self>> {
         // The voxel the points are one per (none: any number per voxel).
         let (cloud, one_per) = match downsampled_at {
-            Some(v) if v >= params.target_voxel => (Cow::Borrowed(target), Some(v)),
+            Some(v) if nests(params.target_voxel, v) => (Cow::Borrowed(target), Some(v)),
             _ if params.target_voxel > 0.0 => (
                 Cow::Owned(target.voxel_downsample(params.target_voxel)?),
                 Some(params.target_voxel),
@@ -361,12 +362,15 @@ impl Target {
                 for dx in -1..=1 {
                     for dy in -1..=1 {
                         for dz in -1..=1 {
-                            let k = VoxelKey::new(
-                                key.x.saturating_add(dx),
-                                key.y.saturating_add(dy),
-                                key.z.saturating_add(dz),
-                            );
-                            if let Some(&j) = cells.get(&k) {
+                            // (Past the key range there is no voxel.)
+                            let (Some(x), Some(y), Some(z)) = (
+                                key.x.checked_add(dx),
+                                key.y.checked_add(dy),
+                                key.z.checked_add(dz),
+                            ) else {
+                                continue;
+                            };
+                            if let Some(&j) = cells.get(&VoxelKey::new(x, y, z)) {
                                 if j as usize != i {
                                     near.push(self.points[j as usize] - c);
                                 }
@@ -388,6 +392,18 @@ impl Target {
         }
         plane_normal(&(cov / n), min_planarity)
     }
+}
+
+/// Whether voxels of `fine` metres nest in voxels of `coarse` metres (0 or the same size,
+/// or `coarse` a whole multiple of `fine`): then downsampling a cloud of one point per
+/// coarse voxel at `fine` keeps every point. (With 0.1 m and 0.07 m it would not: the
+/// 0.07 m voxel [0.07, 0.14) spans two 0.1 m voxels.)
+fn nests(fine: f64, coarse: f64) -> bool {
+    if fine <= 0.0 || fine == coarse {
+        return true;
+    }
+    let ratio = coarse / fine;
+    ratio >= 1.0 && (ratio - ratio.round()).abs() < 1e-9
 }
 
 /// Each voxel's point (of `voxel` metres; points are one per voxel, the first kept where
@@ -498,11 +514,14 @@ mod tests {
         ));
     }
 
-    /// Downsampling a merge's centroids at a finer voxel changes nothing (each finer voxel
-    /// lies inside one of the merge's): what lets a map merged at 0.1 m skip the 0.05 m
-    /// downsampling of the ICP target.
+    /// Downsampling a merge's centroids at a voxel that divides the merge's changes nothing
+    /// (each finer voxel lies inside one of the merge's): what lets a map merged at 0.1 m
+    /// skip the 0.05 m downsampling of the ICP target. A voxel that does not divide it is
+    /// downsampled.
     #[test]
     fn centroids_downsampled_finer_are_unchanged() {
+        assert!(nests(0.05, 0.1) && nests(0.05, 0.05) && nests(0.025, 0.1) && nests(0.0, 0.1));
+        assert!(!nests(0.07, 0.1) && !nests(0.1, 0.05));
         let mut merge = VoxelMerge::new(0.1).unwrap();
         let mut state = 0x1234_5678_9ABC_DEF1u64;
         let mut u = || {
