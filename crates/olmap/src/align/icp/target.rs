@@ -445,6 +445,7 @@ mod tests {
     use super::*;
     use crate::cloud::VoxelMerge;
     use crate::geometry::Pose;
+    use crate::sim::SimRng;
 
     /// A floor and a wall, every 10 cm, and a point alone far from both.
     fn floor_wall_and_a_stray() -> PointCloud {
@@ -523,15 +524,16 @@ mod tests {
         assert!(nests(0.05, 0.1) && nests(0.05, 0.05) && nests(0.025, 0.1) && nests(0.0, 0.1));
         assert!(!nests(0.07, 0.1) && !nests(0.1, 0.05));
         let mut merge = VoxelMerge::new(0.1).unwrap();
-        let mut state = 0x1234_5678_9ABC_DEF1u64;
-        let mut u = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = SimRng::new(7);
         let points: Vec<Point3<f32>> = (0..20_000)
-            .map(|_| Point3::new(u() * 6.0 - 3.0, u() * 6.0 - 3.0, u() * 2.0).cast::<f32>())
+            .map(|_| {
+                let (x, y, z) = (
+                    rng.range(-3.0, 3.0),
+                    rng.range(-3.0, 3.0),
+                    rng.range(0.0, 2.0),
+                );
+                Point3::new(x, y, z).cast::<f32>()
+            })
             .collect();
         merge
             .add(&PointCloud::from_points(points), &Pose::identity())
