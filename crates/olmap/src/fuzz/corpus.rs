@@ -169,6 +169,19 @@ fn real_files(dir: &Path) -> Result<Vec<Sample>> {
     );
     bt.weight = 0.01;
     out.push(bt);
+    // Recorded bags: uncompressed chunks (a CDR test bag, 2D scans of the Intel lab) and
+    // zstd chunks (a talker, one file of a split bag).
+    #[cfg(feature = "bag")]
+    for (rel, weight) in [
+        ("ros2_bags/cdr_test/cdr_test_0.mcap", 1.0),
+        ("ros2_bags/talker/talker.mcap", 1.0),
+        ("ros2_bags/wbag/wbag_0.mcap", 1.0),
+        ("ros2_bags/intel_scans/intel_scans.mcap", 0.05),
+    ] {
+        let mut bag = Sample::new(rel, Target::McapBag, read(rel)?);
+        bag.weight = weight;
+        out.push(bag);
+    }
     #[cfg(feature = "las")]
     for rel in ["las/autzen.las", "las/autzen.laz", "las/autzen.copc.laz"] {
         out.push(Sample::new(
@@ -399,6 +412,17 @@ fn own_files() -> Result<Vec<Sample>> {
     ));
     #[cfg(feature = "bag")]
     out.extend(ros_messages(&cloud));
+    #[cfg(feature = "bag")]
+    {
+        let bag = io::bag::MapBag {
+            cloud: &cloud,
+            poses: Some(&poses),
+            stamp: io::bag::messages::Stamp::from_nanos(1_700_000_000_123_456_789),
+        };
+        let bytes = io::bag::map_mcap_bytes(&bag)
+            .map_err(|e| Error::InvalidArgument(format!("the fuzzer's map bag: {e}")))?;
+        out.push(Sample::new("olmap map bag", Target::McapBag, bytes));
+    }
     let scan = laser_scan();
     out.push(Sample::new(
         "olmap laser scan CSV",

@@ -53,6 +53,12 @@ pub enum Target {
     /// A ROS 2 `tf2_msgs/TFMessage` (CDR, [`io::bag::messages::decode_tf`]).
     #[cfg(feature = "bag")]
     TfMessage,
+    /// A whole MCAP bag file, summarised as `olmap bag info` does ([`io::bag::bag_info`]:
+    /// the container with its chunks, CRCs and decompression, every schema parsed, every
+    /// message decoded from its schema). A file whose reading stopped at damage counts as
+    /// refused.
+    #[cfg(feature = "bag")]
+    McapBag,
 }
 
 impl Target {
@@ -78,6 +84,8 @@ impl Target {
             Target::LaserScanMessage => "ROS 2 LaserScan".into(),
             #[cfg(feature = "bag")]
             Target::TfMessage => "ROS 2 TFMessage".into(),
+            #[cfg(feature = "bag")]
+            Target::McapBag => "ROS 2 bag (MCAP)".into(),
         }
     }
 
@@ -131,6 +139,15 @@ impl Target {
                 .len()),
             #[cfg(feature = "bag")]
             Target::TfMessage => Ok(io::bag::messages::decode_tf(bytes).map_err(cdr)?.len()),
+            #[cfg(feature = "bag")]
+            Target::McapBag => {
+                let info = io::bag::bag_info_of_bytes(bytes, std::path::Path::new("fuzz.mcap"))
+                    .map_err(|e| ParseError::Malformed(e.to_string()))?;
+                match info.stopped_early {
+                    Some(why) => Err(ParseError::Malformed(why)),
+                    None => Ok(info.messages as usize),
+                }
+            }
         }
     }
 }

@@ -571,3 +571,74 @@ fn a_broken_odometry_message_is_named_and_the_scans_still_come_out() {
         ex.skipped
     );
 }
+
+/// Issue 22, item 3 (readers cap allocations by the bytes present), found by fuzzing the
+/// bag container: a 10 KB bag whose first record claimed 805 MB made `olmap bag info` hold
+/// 793 MB (the reader sized its buffer to the claim before reading). A claim past the end
+/// of the file now ends the reading as damage, and a chunk may not decompress to more
+/// than 64 times its file (at least 32 MiB): both say so, and nothing that large is
+/// allocated.
+#[test]
+fn a_length_past_the_end_of_the_file_is_damage_not_an_allocation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cloud = PointCloud::from_points(
+        (0..200)
+            .map(|i| Point3::new(i as f32 * 0.01, 1.0, 0.5))
+            .collect(),
+    );
+    let good = tmp.path().join("map.mcap");
+    write_map_mcap(
+        &good,
+        &MapBag {
+            cloud: &cloud,
+            poses: None,
+            stamp: Stamp::from_nanos(0),
+        },
+    )
+    .unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    assert_eq!(bag_info(&Bag::open(&good).unwrap()).unwrap().messages, 1);
+    // The records after the 8-byte magic: opcode (1 byte), length (u64).
+    let records = |b: &[u8]| {
+        let mut at = 8;
+        let mut out = Vec::new();
+        while at + 9 <= b.len() {
+            let len = u64::from_le_bytes(b[at + 1..at + 9].try_into().unwrap());
+            out.push((b[at], at));
+            at += 9 + len as usize;
+        }
+        out
+    };
+    let stop = |b: &[u8]| {
+        let path = tmp.path().join("damaged.mcap");
+        std::fs::write(&path, b).unwrap();
+        bag_info(&Bag::open(&path).unwrap())
+            .unwrap()
+            .stopped_early
+            .expect("the damage is reported")
+    };
+    // The header record (opcode 1) claims 20 MB (within the record limit of a small
+    // file, past its end), then 805 MB (past the limit).
+    let (op, at) = records(&bytes)[0];
+    assert_eq!(op, 1);
+    for (claim, said) in [
+        (20_000_000u64, format!("has {} left", bytes.len() - 17)),
+        (805_306_368, "805306368".to_string()),
+    ] {
+        let mut lying = bytes.clone();
+        lying[at + 1..at + 9].copy_from_slice(&claim.to_le_bytes());
+        let why = stop(&lying);
+        assert!(why.contains(&said), "{claim}: {why}");
+    }
+    // The chunk (opcode 6) claims to decompress to 900 MB: over 64 x the file.
+    let mut bomb = bytes.clone();
+    let (_, chunk) = *records(&bytes)
+        .iter()
+        .find(|(op, _)| *op == 6)
+        .expect("a chunk");
+    // Chunk: start time, end time (u64 each), then the uncompressed size.
+    let size = chunk + 9 + 16;
+    bomb[size..size + 8].copy_from_slice(&900_000_000u64.to_le_bytes());
+    let why = stop(&bomb);
+    assert!(why.contains("900000000"), "{why}");
+}

@@ -195,7 +195,12 @@ fn fuzz_short_pass_over_every_reader() {
     #[cfg(feature = "las")]
     assert!(names.contains(&"LAS/LAZ"), "LAS/LAZ not fuzzed: {names:?}");
     #[cfg(feature = "bag")]
-    for needed in ["ROS 2 PointCloud2", "ROS 2 LaserScan", "ROS 2 TFMessage"] {
+    for needed in [
+        "ROS 2 PointCloud2",
+        "ROS 2 LaserScan",
+        "ROS 2 TFMessage",
+        "ROS 2 bag (MCAP)",
+    ] {
         assert!(names.contains(&needed), "{needed} not fuzzed: {names:?}");
     }
 }

@@ -200,6 +200,23 @@ impl Bag {
     }
 }
 
+/// A decompressed chunk may hold this many times the bytes of its file (and at least
+/// [`MIN_CHUNK_LIMIT`], at most [`MAX_RECORD_BYTES`]): what the decompressors' buffers may
+/// grow to, whatever a damaged chunk header claims. The same rule as the gzip and bzip2
+/// readers' (`io::open_text`).
+pub const MAX_EXPANSION: u64 = 64;
+
+/// The decompressed chunk size allowed in any file, however small (32 MiB).
+pub const MIN_CHUNK_LIMIT: u64 = 32 << 20;
+
+/// The largest record or decompressed chunk read from a file of `len` bytes
+/// ([`MAX_EXPANSION`]).
+fn record_limit(len: u64) -> usize {
+    len.saturating_mul(MAX_EXPANSION)
+        .max(MIN_CHUNK_LIMIT)
+        .min(MAX_RECORD_BYTES as u64) as usize
+}
+
 /// Reads one MCAP file; `Ok(false)` when `visit` asked to stop.
 fn read_file(
     file: &Path,
@@ -207,41 +224,75 @@ fn read_file(
     delivered: &mut u64,
     visit: &mut impl FnMut(&BagMessage<'_>) -> Result<bool, BagError>,
 ) -> Result<bool, BagError> {
-    let mut f = std::fs::File::open(file).map_err(|source| BagError::Io {
+    let io = |source| BagError::Io {
         path: file.to_path_buf(),
         source,
-    })?;
+    };
+    let f = std::fs::File::open(file).map_err(io)?;
+    let len = f.metadata().map_err(io)?.len();
+    read_stream(f, len, file, topic_counts, delivered, visit)
+}
+
+/// Reads the MCAP file `file` of `len` bytes from `src` (its start); `Ok(false)` when
+/// `visit` asked to stop. Nothing is allocated for more bytes than the file has left: a
+/// record claiming more (a damaged length) ends the reading as a damaged file, and a
+/// chunk is decompressed to at most [`record_limit`] bytes.
+pub(crate) fn read_stream(
+    mut f: impl Read,
+    len: u64,
+    file: &Path,
+    topic_counts: &mut HashMap<String, u64>,
+    delivered: &mut u64,
+    visit: &mut impl FnMut(&BagMessage<'_>) -> Result<bool, BagError>,
+) -> Result<bool, BagError> {
     let options = LinearReaderOptions::default()
         .with_validate_chunk_crcs(true)
         .with_prevalidate_chunk_crcs(true)
-        .with_record_length_limit(MAX_RECORD_BYTES);
+        .with_record_length_limit(record_limit(len));
     let mut reader = LinearReader::new_with_options(options);
     let container = |reason: String, delivered: u64| BagError::Container {
         file: file.to_path_buf(),
         reason,
         messages: delivered,
     };
+    // Bytes of the file not read yet.
+    let mut left = len;
     reader
         .add_decompressor(super::lz4::Lz4FrameDecoder::new())
         .map_err(|e| container(e.to_string(), *delivered))?;
     let mut schemas: HashMap<u16, Arc<SchemaInfo>> = HashMap::new();
     let mut channels: HashMap<u16, Channel> = HashMap::new();
-    while let Some(event) = reader.next_event() {
+    while let Some(event) = guarded(|| reader.next_event()).map_err(|e| container(e, *delivered))? {
         let event = event.map_err(|e| container(describe(&e), *delivered))?;
         let (opcode, data) = match event {
             LinearReadEvent::ReadRequest(n) => {
-                let buf = reader.insert(n);
+                // The reader asks for what the record it is in claims; a claim past the
+                // end of the file is a damaged length (or a cut file), refused before the
+                // buffer grows to it. (At the very end it asks once more, for 0 bytes
+                // read: the end of the file.)
+                if n as u64 > left && left > 0 {
+                    return Err(container(
+                        format!(
+                            "a record claims {n} more bytes where the file has {left} left: \
+                             the file is truncated, or a length in it is damaged"
+                        ),
+                        *delivered,
+                    ));
+                }
+                let buf = reader.insert(n.min(left.max(1) as usize));
                 let got = f.read(buf).map_err(|source| BagError::Io {
                     path: file.to_path_buf(),
                     source,
                 })?;
+                left = left.saturating_sub(got as u64);
                 reader.notify_read(got);
                 continue;
             }
             LinearReadEvent::Record { opcode, data } => (opcode, data),
         };
-        let record =
-            mcap::parse_record(opcode, data).map_err(|e| container(describe(&e), *delivered))?;
+        let record = guarded(|| mcap::parse_record(opcode, data))
+            .map_err(|e| container(e, *delivered))?
+            .map_err(|e| container(describe(&e), *delivered))?;
         match record {
             Record::Schema { header, data } => {
                 let text = String::from_utf8_lossy(&data).into_owned();
@@ -298,6 +349,22 @@ fn read_file(
         }
     }
     Ok(true)
+}
+
+/// Runs a call into the `mcap` crate, turning a panic into the reason the file is refused.
+/// Its reader has arithmetic that damaged lengths can overflow (mcap 0.26: a record inside
+/// an uncompressed chunk whose CRC is 0, the "not computed" value, claiming more than the
+/// chunk holds), which panics where overflow is checked (debug and test builds) and wraps
+/// where it is not; the fuzzer found it. The panic hook still runs.
+fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|payload| {
+        let why = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        format!("the MCAP reader failed on damaged data ({why})")
+    })
 }
 
 fn describe(e: &mcap::McapError) -> String {

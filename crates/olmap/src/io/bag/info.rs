@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
-use super::container::Bag;
+use super::container::{Bag, BagMessage};
 use super::dynamic::{self, Value};
 use super::error::BagError;
 
@@ -56,14 +56,58 @@ pub const MAX_PROBLEMS: usize = 20;
 /// [`BagInfo::problems`], and a damaged file ends the reading with
 /// [`BagInfo::stopped_early`] set. Only a bag that cannot be opened is an error.
 pub fn bag_info(bag: &Bag) -> Result<BagInfo, BagError> {
-    let mut topics: BTreeMap<String, TopicInfo> = BTreeMap::new();
-    let mut frames = BTreeSet::new();
-    let mut problems = Vec::new();
-    let mut messages = 0u64;
+    let mut summary = Summary::default();
     let result = bag.for_each_message(|m| {
-        messages += 1;
+        summary.add(m);
+        Ok(true)
+    });
+    summary.finish(
+        bag.path.display().to_string(),
+        bag.files.iter().map(|f| f.display().to_string()).collect(),
+        result,
+    )
+}
+
+#[cfg(any(test, feature = "test-support"))]
+/// [`bag_info`] of one MCAP file's bytes, named `name` in messages (what the fuzzer drives:
+/// the same container reading, schema parsing and message decoding).
+pub(crate) fn bag_info_of_bytes(bytes: &[u8], name: &std::path::Path) -> Result<BagInfo, BagError> {
+    let mut summary = Summary::default();
+    let (mut counts, mut delivered) = (std::collections::HashMap::new(), 0);
+    let result = super::container::read_stream(
+        bytes,
+        bytes.len() as u64,
+        name,
+        &mut counts,
+        &mut delivered,
+        &mut |m| {
+            summary.add(m);
+            Ok(true)
+        },
+    );
+    summary.finish(
+        name.display().to_string(),
+        vec![name.display().to_string()],
+        result.map(|_| ()),
+    )
+}
+
+/// What [`bag_info`] gathers message by message.
+#[derive(Default)]
+struct Summary {
+    topics: BTreeMap<String, TopicInfo>,
+    frames: BTreeSet<String>,
+    problems: Vec<String>,
+    messages: u64,
+}
+
+impl Summary {
+    /// Counts one message and decodes it from its schema.
+    fn add(&mut self, m: &BagMessage<'_>) {
+        self.messages += 1;
         let t = m.log_time as f64 * 1e-9;
-        let e = topics
+        let e = self
+            .topics
             .entry(m.topic.to_string())
             .or_insert_with(|| TopicInfo {
                 name: m.topic.to_string(),
@@ -82,33 +126,42 @@ pub fn bag_info(bag: &Bag) -> Result<BagInfo, BagError> {
             Some(Err(e)) => Some(e.to_string()),
             Some(Ok(defs)) => match dynamic::decode(defs, m.data) {
                 Ok(v) => {
-                    collect_frames(&v, &mut frames);
+                    collect_frames(&v, &mut self.frames);
                     None
                 }
                 Err(e) => Some(e.to_string()),
             },
         };
         if let Some(p) = problem {
-            if problems.len() < MAX_PROBLEMS {
-                problems.push(m.error(p).to_string());
+            if self.problems.len() < MAX_PROBLEMS {
+                self.problems.push(m.error(p).to_string());
             }
         }
-        Ok(true)
-    });
-    let stopped_early = match result {
-        Ok(()) => None,
-        Err(e @ BagError::Container { .. }) => Some(e.to_string()),
-        Err(e) => return Err(e),
-    };
-    Ok(BagInfo {
-        path: bag.path.display().to_string(),
-        files: bag.files.iter().map(|f| f.display().to_string()).collect(),
-        topics: topics.into_values().collect(),
-        messages,
-        frames: frames.into_iter().collect(),
-        problems,
-        stopped_early,
-    })
+    }
+
+    /// The summary, once reading ended with `result` (a damaged container is
+    /// [`BagInfo::stopped_early`]; any other error is returned).
+    fn finish(
+        self,
+        path: String,
+        files: Vec<String>,
+        result: Result<(), BagError>,
+    ) -> Result<BagInfo, BagError> {
+        let stopped_early = match result {
+            Ok(()) => None,
+            Err(e @ BagError::Container { .. }) => Some(e.to_string()),
+            Err(e) => return Err(e),
+        };
+        Ok(BagInfo {
+            path,
+            files,
+            topics: self.topics.into_values().collect(),
+            messages: self.messages,
+            frames: self.frames.into_iter().collect(),
+            problems: self.problems,
+            stopped_early,
+        })
+    }
 }
 
 fn collect_frames(v: &Value, out: &mut BTreeSet<String>) {

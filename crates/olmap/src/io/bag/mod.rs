@@ -13,8 +13,10 @@
 //! | [`extract_scans`], [`write_extraction`] | scans with odometry, in memory or as a folder `olmap map` reads |
 //! | [`write_map_mcap`] | a map and its poses as an MCAP file |
 //!
-//! **Bounds.** A record (or decompressed chunk) over [`MAX_RECORD_BYTES`] is refused;
-//! every count in a message is checked against the bytes left before anything is
+//! **Bounds.** A record claiming more bytes than its file has left is damage (refused
+//! before any buffer grows to the claim); a decompressed chunk may hold at most
+//! [`MAX_EXPANSION`] times its file's bytes (at least [`MIN_CHUNK_LIMIT`], at most
+//! [`MAX_RECORD_BYTES`]); every count in a message is checked against the bytes left before anything is
 //! allocated; chunk CRCs are checked before a chunk's messages are used. A damaged or
 //! truncated file stops the reading at the damage with a [`BagError::Container`] (or
 //! [`BagInfo::stopped_early`]), after delivering every message before it; a message that
@@ -37,14 +39,20 @@ pub mod schema;
 mod tf;
 mod write;
 
-pub use container::{Bag, BagMessage, SchemaInfo, MAX_RECORD_BYTES};
+pub use container::{
+    Bag, BagMessage, SchemaInfo, MAX_EXPANSION, MAX_RECORD_BYTES, MIN_CHUNK_LIMIT,
+};
 pub use error::BagError;
 pub use extract::{
     extract_scans, extract_scans_with, write_extraction, BagScan, ExtractOptions, ExtractReport,
     Extraction, ScanSpec, LASER_SCAN, ODOMETRY, POINT_CLOUD2, TF_MESSAGE,
 };
+#[cfg(any(test, feature = "test-support"))]
+pub(crate) use info::bag_info_of_bytes;
 pub use info::{bag_info, BagInfo, TopicInfo, MAX_PROBLEMS};
 pub use tf::{interpolate, TfTree, DEFAULT_TOLERANCE_NS};
+#[cfg(any(test, feature = "test-support"))]
+pub(crate) use write::map_mcap_bytes;
 pub use write::{write_map_mcap, MapBag};
 
 /// Whether `path` looks like a bag: an `.mcap` file, or a folder holding `metadata.yaml`

@@ -1,6 +1,7 @@
 //! Writing MCAP files Foxglove and the rosbag2 tools open: a map as `PointCloud2`, scan
 //! poses as `nav_msgs/Path` and `/tf`.
 
+use std::io::{Seek, Write};
 use std::path::Path;
 
 use super::messages::{
@@ -28,13 +29,26 @@ pub struct MapBag<'a> {
 /// and `/tf` (`tf2_msgs/msg/TFMessage`, one transform `map -> scan name` per pose, `/`
 /// replaced by `_` in frame names). The file appears complete or not at all.
 pub fn write_map_mcap(path: &Path, map: &MapBag<'_>) -> Result<()> {
-    crate::file::write_atomic(path, "MCAP", |file| {
+    crate::file::write_atomic(path, "MCAP", |file| write_map(file, map))
+}
+
+#[cfg(any(test, feature = "test-support"))]
+/// The bytes [`write_map_mcap`] writes (the fuzzer's sample of olmap's own bags).
+pub(crate) fn map_mcap_bytes(map: &MapBag<'_>) -> std::io::Result<Vec<u8>> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    write_map(&mut out, map)?;
+    Ok(out.into_inner())
+}
+
+/// Writes `map` as MCAP to `out`.
+fn write_map<W: Write + Seek>(out: W, map: &MapBag<'_>) -> std::io::Result<()> {
+    {
         let e = |err: mcap::McapError| std::io::Error::other(err.to_string());
         let mut w = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .profile("ros2")
             .library(concat!("olmap ", env!("CARGO_PKG_VERSION")))
-            .create(file)
+            .create(out)
             .map_err(e)?;
         let t = map.stamp.nanos().max(0) as u64;
         let header = Header {
@@ -116,5 +130,5 @@ pub fn write_map_mcap(path: &Path, map: &MapBag<'_>) -> Result<()> {
         }
         w.finish().map_err(e)?;
         Ok(())
-    })
+    }
 }
