@@ -143,6 +143,8 @@ fn is_broken_pipe(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     quiet_on_closed_pipe();
+    // A decoder panicking on a damaged file is reported as olmap's error, not as a panic.
+    olmap::guard::quiet_guarded_panics();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(a) => commands::info::run(&a),

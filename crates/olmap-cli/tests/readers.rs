@@ -92,3 +92,26 @@ fn audit_cli_bt_bomb_is_refused_with_the_estimate() {
         "{line}"
     );
 }
+
+/// Issue 22, item 4 (no `panicked` on stderr for any input): one byte of the real COPC
+/// file changed (offset 1736, in its compressed points) makes the LASzip decoder of the
+/// `laz` crate index out of range. olmap caught that panic and reported the file as
+/// corrupt, but the panic hook printed "thread 'main' panicked at ..." above the error
+/// first; now the error is all that is printed.
+#[test]
+fn a_laz_file_the_decoder_panics_on_prints_only_the_error() {
+    let Some(data) = olmap::test_data::dir() else {
+        return;
+    };
+    let mut bytes = std::fs::read(data.join("las/autzen.copc.laz")).unwrap();
+    assert_ne!(bytes[1736], 197, "the sample changed: pick another byte");
+    bytes[1736] = 197;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("damaged.copc.laz");
+    std::fs::write(&file, &bytes).unwrap();
+    let out = olmap(&["info", file.to_str().unwrap()]);
+    let line = error_line(&out);
+    assert!(line.contains("corrupt LAS/LAZ data"), "{line}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.trim_end(), line, "only the error is printed");
+}

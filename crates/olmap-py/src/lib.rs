@@ -33,6 +33,8 @@ mod threads;
 /// docstring of `olmap`).
 #[pymodule]
 fn _olmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // A decoder panicking on a damaged file raises olmap's error, without a panic message.
+    olmap::guard::quiet_guarded_panics();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("FormatError", m.py().get_type::<errors::FormatError>())?;
     m.add("TooLargeError", m.py().get_type::<errors::TooLargeError>())?;

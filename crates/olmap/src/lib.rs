@@ -50,6 +50,7 @@ pub mod fuzz;
 pub mod geometry;
 pub mod graph;
 pub mod grid2d;
+pub mod guard;
 pub mod io;
 pub mod limits;
 pub mod mapping;

@@ -395,15 +395,10 @@ impl Axis {
 
 /// Runs a call into the `las` crate, turning a panic into [`ParseError::Malformed`]: its
 /// LASzip decoder (laz 0.13) panics on some corrupt compressed data (an assertion in the
-/// arithmetic decoder, an index out of range) that no check of the header can foresee.
-/// The panic hook still runs (the default one prints the panic to stderr).
+/// arithmetic decoder, an index out of range) that no check of the header can foresee
+/// ([`crate::guard`]).
 fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, ParseError> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|payload| {
-        let why = payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_default();
+    crate::guard::guarded(call).map_err(|why| {
         ParseError::Malformed(format!(
             "corrupt LAS/LAZ data (the LASzip decoder failed: {why})"
         ))

@@ -351,20 +351,14 @@ pub(crate) fn read_stream(
     Ok(true)
 }
 
-/// Runs a call into the `mcap` crate, turning a panic into the reason the file is refused.
-/// Its reader has arithmetic that damaged lengths can overflow (mcap 0.26: a record inside
-/// an uncompressed chunk whose CRC is 0, the "not computed" value, claiming more than the
-/// chunk holds), which panics where overflow is checked (debug and test builds) and wraps
-/// where it is not; the fuzzer found it. The panic hook still runs.
+/// Runs a call into the `mcap` crate, turning a panic into the reason the file is refused
+/// ([`crate::guard`]). Its reader has arithmetic that damaged lengths can overflow (mcap
+/// 0.26: a record inside an uncompressed chunk whose CRC is 0, the "not computed" value,
+/// claiming more than the chunk holds), which panics where overflow is checked (debug and
+/// test builds) and wraps where it is not; the fuzzer found it.
 fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, String> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|payload| {
-        let why = payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_default();
-        format!("the MCAP reader failed on damaged data ({why})")
-    })
+    crate::guard::guarded(call)
+        .map_err(|why| format!("the MCAP reader failed on damaged data ({why})"))
 }
 
 fn describe(e: &mcap::McapError) -> String {
