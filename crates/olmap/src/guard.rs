@@ -3,7 +3,7 @@
 //! Two decoders olmap uses panic on some damaged files no check beforehand can foresee: the
 //! LASzip decoder of the `laz` crate (an assertion in its arithmetic decoder, an index out
 //! of range on a corrupt chunk table) and the `mcap` reader (arithmetic on a damaged length
-//! that overflows where overflow is checked). olmap runs those calls through [`guarded`],
+//! that overflows where overflow is checked). olmap runs those calls through `guarded` (crate-private),
 //! which catches the panic and hands its message to the caller, who reports the file as
 //! damaged with a typed error. The panic hook still runs when the panic happens; a program
 //! that reports errors itself installs [`quiet_guarded_panics`] once, so that a damaged
@@ -19,7 +19,10 @@ thread_local! {
 }
 
 /// Runs `call`; a panic inside it becomes `Err(its message)`. Only for calls into a
-/// decoder whose state is dropped afterwards (nothing it touched is used again).
+/// decoder whose state is dropped afterwards (nothing it touched is used again). The quiet
+/// hook knows the call by this thread only: a panic on a thread the call started would
+/// still be printed (neither guarded decoder starts threads: `laz` is built without its
+/// `parallel` feature, the MCAP reader and its decompressors run on the caller's thread).
 #[cfg_attr(not(any(feature = "las", feature = "bag")), allow(dead_code))]
 pub(crate) fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, String> {
     DEPTH.with(|d| d.set(d.get() + 1));
@@ -34,7 +37,7 @@ pub(crate) fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, String> {
     })
 }
 
-/// Installs, once per process, a panic hook that prints nothing for a panic [`guarded`]
+/// Installs, once per process, a panic hook that prints nothing for a panic `guarded`
 /// catches (its caller reports the damaged file) and passes every other panic to the hook
 /// installed before it (by default: the message on stderr).
 ///

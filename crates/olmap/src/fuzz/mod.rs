@@ -9,6 +9,10 @@
 //! reader ([`Target`]) inside [`std::panic::catch_unwind`]. Case `i` of seed `s` depends
 //! on nothing else, so any case can be replayed alone ([`replay`]).
 //!
+//! A panic inside a third-party decoder that olmap guards ([`crate::guard`]: the LASzip
+//! decoder, the MCAP reader) is already a refusal when it reaches the fuzzer, so new
+//! panics of those decoders are not reported; every panic of olmap's own code is.
+//!
 //! What a run looks for, besides panics: cases slower than [`FuzzConfig::slow_seconds`]
 //! (time bombs), and error messages that say something twice (`line 3: X: line 3: X`).
 //! Memory is not measured per case: every case runs in the calling process, so the

@@ -200,21 +200,13 @@ impl Bag {
     }
 }
 
-/// A decompressed chunk may hold this many times the bytes of its file (and at least
-/// [`MIN_CHUNK_LIMIT`], at most [`MAX_RECORD_BYTES`]): what the decompressors' buffers may
-/// grow to, whatever a damaged chunk header claims. The same rule as the gzip and bzip2
-/// readers' (`io::open_text`).
-pub const MAX_EXPANSION: u64 = 64;
-
-/// The decompressed chunk size allowed in any file, however small (32 MiB).
-pub const MIN_CHUNK_LIMIT: u64 = 32 << 20;
-
-/// The largest record or decompressed chunk read from a file of `len` bytes
-/// ([`MAX_EXPANSION`]).
+/// The largest record or decompressed chunk read from a file of `len` bytes: what the
+/// gzip and bzip2 readers allow a whole stream ([`crate::io::max_decompressed_bytes`]:
+/// [`crate::io::DECOMPRESSION_RATIO`] times the file, at least
+/// [`crate::io::DECOMPRESSED_FLOOR_BYTES`]), here per record and chunk, at most
+/// [`MAX_RECORD_BYTES`]. A damaged chunk header cannot make the decompressor's buffer larger.
 fn record_limit(len: u64) -> usize {
-    len.saturating_mul(MAX_EXPANSION)
-        .max(MIN_CHUNK_LIMIT)
-        .min(MAX_RECORD_BYTES as u64) as usize
+    crate::io::max_decompressed_bytes(len).min(MAX_RECORD_BYTES as u64) as usize
 }
 
 /// Reads one MCAP file; `Ok(false)` when `visit` asked to stop.
@@ -234,9 +226,9 @@ fn read_file(
 }
 
 /// Reads the MCAP file `file` of `len` bytes from `src` (its start); `Ok(false)` when
-/// `visit` asked to stop. Nothing is allocated for more bytes than the file has left: a
-/// record claiming more (a damaged length) ends the reading as a damaged file, and a
-/// chunk is decompressed to at most [`record_limit`] bytes.
+/// `visit` asked to stop. The reader's buffer never grows past the bytes the file has
+/// left: a record claiming more (a damaged length, or a file cut short) ends the reading
+/// as damage, saying so; a record or decompressed chunk is at most [`record_limit`] bytes.
 pub(crate) fn read_stream(
     mut f: impl Read,
     len: u64,
@@ -245,41 +237,48 @@ pub(crate) fn read_stream(
     delivered: &mut u64,
     visit: &mut impl FnMut(&BagMessage<'_>) -> Result<bool, BagError>,
 ) -> Result<bool, BagError> {
+    let limit = record_limit(len);
     let options = LinearReaderOptions::default()
         .with_validate_chunk_crcs(true)
         .with_prevalidate_chunk_crcs(true)
-        .with_record_length_limit(record_limit(len));
+        .with_record_length_limit(limit);
     let mut reader = LinearReader::new_with_options(options);
     let container = |reason: String, delivered: u64| BagError::Container {
         file: file.to_path_buf(),
         reason,
         messages: delivered,
     };
-    // Bytes of the file not read yet.
+    // Bytes of the file not read yet, and the first request for more than that.
     let mut left = len;
+    let mut overclaim: Option<(usize, u64)> = None;
     reader
         .add_decompressor(super::lz4::Lz4FrameDecoder::new())
         .map_err(|e| container(e.to_string(), *delivered))?;
     let mut schemas: HashMap<u16, Arc<SchemaInfo>> = HashMap::new();
     let mut channels: HashMap<u16, Channel> = HashMap::new();
     while let Some(event) = guarded(|| reader.next_event()).map_err(|e| container(e, *delivered))? {
-        let event = event.map_err(|e| container(describe(&e), *delivered))?;
+        let event = event.map_err(|e| {
+            let reason = match (&e, overclaim) {
+                (mcap::McapError::UnexpectedEof, Some((n, had))) => format!(
+                    "a record claims {n} more bytes where the file has {had} left: the file is \
+                     truncated, or a length in it is damaged"
+                ),
+                _ => describe(&e, limit, len),
+            };
+            container(reason, *delivered)
+        })?;
         let (opcode, data) = match event {
             LinearReadEvent::ReadRequest(n) => {
-                // The reader asks for what the record it is in claims; a claim past the
-                // end of the file is a damaged length (or a cut file), refused before the
-                // buffer grows to it. (At the very end it asks once more, for 0 bytes
-                // read: the end of the file.)
-                if n as u64 > left && left > 0 {
-                    return Err(container(
-                        format!(
-                            "a record claims {n} more bytes where the file has {left} left: \
-                             the file is truncated, or a length in it is damaged"
-                        ),
-                        *delivered,
-                    ));
+                // The reader asks for what the structure it is in claims. A claim past the
+                // end of the file (a damaged length, or a file cut short) gets what is
+                // left, and the end of the file then stops the reading: the buffer never
+                // grows to a length the file does not hold. (A file that ends where it
+                // should is never asked for more than it has.)
+                let available = usize::try_from(left).unwrap_or(usize::MAX);
+                if n > available && overclaim.is_none() {
+                    overclaim = Some((n, left));
                 }
-                let buf = reader.insert(n.min(left.max(1) as usize));
+                let buf = reader.insert(n.min(available.max(1)));
                 let got = f.read(buf).map_err(|source| BagError::Io {
                     path: file.to_path_buf(),
                     source,
@@ -292,7 +291,7 @@ pub(crate) fn read_stream(
         };
         let record = guarded(|| mcap::parse_record(opcode, data))
             .map_err(|e| container(e, *delivered))?
-            .map_err(|e| container(describe(&e), *delivered))?;
+            .map_err(|e| container(describe(&e, limit, len), *delivered))?;
         match record {
             Record::Schema { header, data } => {
                 let text = String::from_utf8_lossy(&data).into_owned();
@@ -361,11 +360,17 @@ fn guarded<T>(call: impl FnOnce() -> T) -> Result<T, String> {
         .map_err(|why| format!("the MCAP reader failed on damaged data ({why})"))
 }
 
-fn describe(e: &mcap::McapError) -> String {
+/// What an MCAP error says about the file, with the size limit when a record or chunk
+/// was over it (`limit` bytes, for a file of `len`).
+fn describe(e: &mcap::McapError, limit: usize, len: u64) -> String {
     match e {
         mcap::McapError::UnexpectedEof => {
             "the file ends in the middle of a record (truncated?)".into()
         }
+        mcap::McapError::RecordTooLarge { .. } | mcap::McapError::ChunkTooLarge(_) => format!(
+            "{e} (olmap reads a record or decompressed chunk of at most {limit} bytes from a \
+             file of {len} bytes: 64 times the file, at least 32 MiB)"
+        ),
         other => other.to_string(),
     }
 }

@@ -13,10 +13,10 @@
 //! | [`extract_scans`], [`write_extraction`] | scans with odometry, in memory or as a folder `olmap map` reads |
 //! | [`write_map_mcap`] | a map and its poses as an MCAP file |
 //!
-//! **Bounds.** A record claiming more bytes than its file has left is damage (refused
-//! before any buffer grows to the claim); a decompressed chunk may hold at most
-//! [`MAX_EXPANSION`] times its file's bytes (at least [`MIN_CHUNK_LIMIT`], at most
-//! [`MAX_RECORD_BYTES`]); every count in a message is checked against the bytes left before anything is
+//! **Bounds.** A record claiming more bytes than its file has left is damage (the reader's
+//! buffer never grows past what the file holds); a record or decompressed chunk may hold at most
+//! [`crate::io::max_decompressed_bytes`] of its file's size (64 times it, at least 32 MiB),
+//! and never more than [`MAX_RECORD_BYTES`]; every count in a message is checked against the bytes left before anything is
 //! allocated; chunk CRCs are checked before a chunk's messages are used. A damaged or
 //! truncated file stops the reading at the damage with a [`BagError::Container`] (or
 //! [`BagInfo::stopped_early`]), after delivering every message before it; a message that
@@ -39,9 +39,7 @@ pub mod schema;
 mod tf;
 mod write;
 
-pub use container::{
-    Bag, BagMessage, SchemaInfo, MAX_EXPANSION, MAX_RECORD_BYTES, MIN_CHUNK_LIMIT,
-};
+pub use container::{Bag, BagMessage, SchemaInfo, MAX_RECORD_BYTES};
 pub use error::BagError;
 pub use extract::{
     extract_scans, extract_scans_with, write_extraction, BagScan, ExtractOptions, ExtractReport,

@@ -78,8 +78,8 @@ impl State<'_> {
     /// Whether a search [`MUTUAL_CONFIRM_GROWTH`] times as wide in x and y (twice in
     /// heading) as the two-way sighting's window `params` finds a distinct pose that fits
     /// the map clearly better than the trusted match `r` of that window (its fit refutes
-    /// `r`'s by the verdict's [`TrustThresholds::min_refutation`]); if so `r` is distrusted,
-    /// saying why.
+    /// `r`'s by the verdict's [`TrustThresholds::min_refutation`]) and agrees with it at
+    /// least as well; if so `r` is distrusted, saying why.
     ///
     /// Why: the window is the sighting's uncertainty (±0.3 m), so nothing outside it
     /// competes with a match inside it. When the sighting is wrong by more (a failed
@@ -88,7 +88,10 @@ impl State<'_> {
     /// (seed 1, two robots) a two-way sighting shifted 1.0 m placed the scan 1.0 m off as
     /// a trusted match (overlap 13 %, agreement 0.894); the truth, 1 m away, fits the map
     /// better by 8σ. A look-alike that fits about as well as the match (rows of desks) does
-    /// not veto it: resolving that ambiguity is what the sighting is for.
+    /// not veto it: resolving that ambiguity is what the sighting is for. Not done for an
+    /// untrusted match, before the sighting alone places the scan (`mutual_alone`): there
+    /// the map is often ambiguous along a wall, and its best fit lies 0.3-0.5 m from a
+    /// right sighting too (lab seed 1), so a wider look would refuse right sightings.
     ///
     /// [`TrustThresholds::min_refutation`]: crate::align::TrustThresholds::min_refutation
     fn wider_look_vetoes(
@@ -115,8 +118,13 @@ impl State<'_> {
         if same_solution(&won.pose(), &r.pose, resolution) {
             return Ok(false);
         }
+        // A count that only grows with overlap does not veto: the better pose must also
+        // agree with the map at least as well (a look-alike overlapping more of the map at
+        // its edge can out-count a right match there).
         let margin = refutation(won, ours);
-        if margin < params.trust.min_refutation {
+        if margin < params.trust.min_refutation
+            || won.consistency.agreement() < ours.consistency.agreement()
+        {
             return Ok(false);
         }
         let d = won.pose().translation() - r.pose.translation();
