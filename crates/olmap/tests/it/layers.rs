@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first; modules in one layer may not import each other.
 const LAYERS: &[&[&str]] = &[
-    &["error", "progress"],
+    &["error", "progress", "guard"],
     &["file", "limits"],
     &["geometry"],
     &["cloud"],
