@@ -3,9 +3,9 @@
 //! Two decoders olmap uses panic on some damaged files no check beforehand can foresee: the
 //! LASzip decoder of the `laz` crate (an assertion in its arithmetic decoder, an index out
 //! of range on a corrupt chunk table) and the `mcap` reader (arithmetic on a damaged length
-//! that overflows where overflow is checked). olmap runs those calls through `guarded` (crate-private),
-//! which catches the panic and hands its message to the caller, who reports the file as
-//! damaged with a typed error. The panic hook still runs when the panic happens; a program
+//! that overflows where overflow is checked). olmap runs those calls through `guarded`
+//! (crate-private), which catches the panic and hands its message to the caller, who
+//! reports the file as damaged with a typed error. The panic hook still runs when the panic happens; a program
 //! that reports errors itself installs [`quiet_guarded_panics`] once, so that a damaged
 //! file prints its error and nothing else (the `olmap` command and the Python module do).
 

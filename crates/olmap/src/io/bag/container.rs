@@ -369,7 +369,9 @@ fn describe(e: &mcap::McapError, limit: usize, len: u64) -> String {
         }
         mcap::McapError::RecordTooLarge { .. } | mcap::McapError::ChunkTooLarge(_) => format!(
             "{e} (olmap reads a record or decompressed chunk of at most {limit} bytes from a \
-             file of {len} bytes: 64 times the file, at least 32 MiB)"
+             file of {len} bytes: {} times the file, at least {} MiB)",
+            crate::io::DECOMPRESSION_RATIO,
+            crate::io::DECOMPRESSED_FLOOR_BYTES >> 20
         ),
         other => other.to_string(),
     }

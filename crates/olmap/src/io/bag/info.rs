@@ -68,9 +68,9 @@ pub fn bag_info(bag: &Bag) -> Result<BagInfo, BagError> {
     )
 }
 
-#[cfg(any(test, feature = "test-support"))]
 /// [`bag_info`] of one MCAP file's bytes, named `name` in messages (what the fuzzer drives:
 /// the same container reading, schema parsing and message decoding).
+#[cfg(any(test, feature = "test-support"))]
 pub(crate) fn bag_info_of_bytes(bytes: &[u8], name: &std::path::Path) -> Result<BagInfo, BagError> {
     let mut summary = Summary::default();
     let (mut counts, mut delivered) = (std::collections::HashMap::new(), 0);

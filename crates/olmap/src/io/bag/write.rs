@@ -32,8 +32,8 @@ pub fn write_map_mcap(path: &Path, map: &MapBag<'_>) -> Result<()> {
     crate::file::write_atomic(path, "MCAP", |file| write_map(file, map))
 }
 
-#[cfg(any(test, feature = "test-support"))]
 /// The bytes [`write_map_mcap`] writes (the fuzzer's sample of olmap's own bags).
+#[cfg(any(test, feature = "test-support"))]
 pub(crate) fn map_mcap_bytes(map: &MapBag<'_>) -> std::io::Result<Vec<u8>> {
     let mut out = std::io::Cursor::new(Vec::new());
     write_map(&mut out, map)?;
