@@ -39,6 +39,10 @@ pub struct NetBenchOptions {
     /// robot 0, as robots that do not share a clock do) instead of all in the same
     /// instant (default false: the worst case, every stop's records queue together).
     pub staggered: bool,
+    /// How long the mapper waits after records arrive before reading them
+    /// ([`MapperOptions::settle`]; default 0). A settle longer than the time between
+    /// publications makes the mapper read several records at once, as a busy mapper does.
+    pub settle: Duration,
 }
 
 impl Default for NetBenchOptions {
@@ -52,6 +56,7 @@ impl Default for NetBenchOptions {
             timeout: Duration::from_secs(1800),
             port: 0,
             staggered: false,
+            settle: Duration::ZERO,
         }
     }
 }
@@ -155,7 +160,14 @@ pub fn run_net_bench(
     }
     let n = raw.len() as f64;
     let base_rss = proc_mib("VmRSS:");
-    let dir = std::env::temp_dir().join(format!("olmap-net-bench-{}", std::process::id()));
+    // One folder and team per run: two runs in one process (tests) must not share them.
+    static RUNS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let run = format!(
+        "{}-{}",
+        std::process::id(),
+        RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    );
+    let dir = std::env::temp_dir().join(format!("olmap-net-bench-{run}"));
     std::fs::create_dir_all(&dir)
         .map_err(|e| NetError::InvalidArgument(format!("{}: {e}", dir.display())))?;
     let port = if opts.port != 0 {
@@ -163,7 +175,7 @@ pub fn run_net_bench(
     } else {
         crate::lab::free_loopback_port()?
     };
-    let team = format!("bench{}", std::process::id());
+    let team = format!("bench{}", run.replace('-', "x"));
     let node_opts = |name: &str, role: &str, listen: Option<u16>, connect: &[u16]| {
         NodeOptions::new(
             name,
@@ -178,7 +190,7 @@ pub fn run_net_bench(
             out: dir.join("out"),
             params: TeamParams::default(),
             truth: None,
-            settle: Duration::ZERO,
+            settle: opts.settle,
         })?;
         let mut robots = Vec::new();
         for r in raw.robots() {

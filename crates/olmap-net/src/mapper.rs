@@ -300,14 +300,7 @@ fn mapping_loop(
         if new.is_empty() {
             // Nothing new: retry a waiting scan; else refresh the map snapshot; else wait.
             if live.has_due() {
-                match live.retry_waiting(RETRIES_PER_ROUND) {
-                    Ok(placed) => {
-                        if !placed.is_empty() {
-                            publish(shared, latest, &live, &placed, false);
-                        }
-                    }
-                    Err(e) => report_once(shared, &mut reported_error, &e),
-                }
+                retry_round(shared, latest, &mut live, &mut reported_error);
             } else if map_snapshot_at != live.placements().len() {
                 map_snapshot_at = live.placements().len();
                 snapshot_map(shared, latest, &mut live);
@@ -322,9 +315,23 @@ fn mapping_loop(
             }
             continue;
         }
-        for (name, scan) in new {
+        for (k, (name, scan)) in new.into_iter().enumerate() {
             if !running() {
                 break;
+            }
+            // Records read together (they arrived while this thread was busy or settling)
+            // are handled as if each had arrived alone: the waiting scans the previous one
+            // made due are retried before the next is added. Otherwise a waiting scan is
+            // retried against a map that grew meanwhile, and a registration that succeeds
+            // against the smaller map can fail against the larger one: with the scan's
+            // robot tied by it alone, three records of the staggered bench waited for good
+            // when this thread was 0.3 s late.
+            if k > 0 {
+                while running() && live.has_due() {
+                    if !retry_round(shared, latest, &mut live, &mut reported_error) {
+                        break;
+                    }
+                }
             }
             match live.add(&scan, &name) {
                 Ok(ScanOutcome::Placed(_)) => {
@@ -333,6 +340,28 @@ fn mapping_loop(
                 Ok(ScanOutcome::Waiting(_)) => publish(shared, latest, &live, &[], true),
                 Err(e) => report_once(shared, &mut reported_error, &e),
             }
+        }
+    }
+}
+
+/// One round of retries of the live map's waiting scans ([`RETRIES_PER_ROUND`]), the
+/// placements published; `false` when the round failed (the error reported once).
+fn retry_round(
+    shared: &Shared,
+    latest: &Mutex<Latest>,
+    live: &mut LiveTeam,
+    reported_error: &mut bool,
+) -> bool {
+    match live.retry_waiting(RETRIES_PER_ROUND) {
+        Ok(placed) => {
+            if !placed.is_empty() {
+                publish(shared, latest, live, &placed, false);
+            }
+            true
+        }
+        Err(e) => {
+            report_once(shared, reported_error, &e);
+            false
         }
     }
 }
