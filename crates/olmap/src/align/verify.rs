@@ -259,7 +259,7 @@ pub fn same_solution(a: &Pose, b: &Pose, resolution: f64) -> bool {
 }
 
 /// [`Verification::refutation`] of `rival` against `winner`.
-fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
+pub(crate) fn refutation(winner: &Hypothesis, rival: &Hypothesis) -> f64 {
     let counts = |h: &Hypothesis| (h.supported() as f64, h.contradicted() as f64);
     let ((sw, cw), (sr, cr)) = (counts(winner), counts(rival));
     let w2 = CONTRADICTION_WEIGHT * CONTRADICTION_WEIGHT;

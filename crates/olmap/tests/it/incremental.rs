@@ -514,3 +514,50 @@ fn the_batch_mapper_grows_along_the_path_before_searching_a_wide_corridor_window
     assert_placed_within(&build, robot, 0.3);
     assert!(build.placed.len() >= 20, "{} placed", build.placed.len());
 }
+
+/// Issue 23's finding, a confident wrong placement (issue 22): a two-way sighting wrong by
+/// 1.0 m (lab seed 1) placed robot 1's scan 1.0 m off as a *trusted* match: the sighting's
+/// ±0.3 m window held a look-alike near the wrong pose (overlap 13 %, agreement 0.89) and
+/// not the truth. A search four times as wide finds a pose that fits the map clearly better,
+/// and the scan waits. The same sighting unshifted still places the scan (within 5 cm).
+#[test]
+fn a_two_way_sighting_a_metre_off_is_not_trusted_on_a_look_alike_in_its_window() {
+    let data = lab(1, 2, 2, OdometryNoise::degraded());
+    let truth = |r: usize, k: usize| data.robots[0].truth[0].inverse() * data.robots[r].truth[k];
+    for shift in [0.0, 1.0] {
+        let mut mapper = team_mapper();
+        mapper
+            .add_linked_scan(scan_input(&data, 0, 0), 0, 0, Vec::new())
+            .unwrap();
+        let moved = olmap::geometry::Pose::from_xyz_ypr(0.0, shift, 0.0, 0.0, 0.0, 0.0);
+        let link = ScanLink::Mutual {
+            other: 0,
+            relative: moved * truth(1, 1),
+        };
+        let outcome = mapper
+            .add_linked_scan(scan_input(&data, 1, 1), 1, 1, vec![link])
+            .unwrap();
+        match outcome {
+            ScanOutcome::Placed(p) => {
+                let e = PoseError::between(&p.pose, &truth(1, 1));
+                assert!(
+                    e.translation_m <= 0.05,
+                    "sighting shifted {shift} m: placed {:.3} m off via {:?}",
+                    e.translation_m,
+                    p.via
+                );
+            }
+            ScanOutcome::Waiting(w) => {
+                assert!(
+                    shift > 0.0,
+                    "the true sighting left the scan waiting: {w:?}"
+                );
+                assert!(
+                    w.reasons.iter().any(|r| r.contains("4 times as wide")),
+                    "{:?}",
+                    w.reasons
+                );
+            }
+        }
+    }
+}
