@@ -13,9 +13,7 @@ use rayon::prelude::*;
 
 use super::lattice::{key_of, rank, region_counts, threshold, Cand, Lattice, Problem, Scored};
 use super::params::{Dof, Locus, Region, SearchParams};
-use super::score::CellGrid;
 use super::score::DenseGrid;
-use super::score::RowGrid;
 use crate::error::Result;
 use crate::geometry::VoxelKey;
 use crate::occupancy::{OccupancyList, Pyramid};
@@ -25,9 +23,7 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
     let l = &problem.lattice;
     let cell = l.cell(level);
     let scan = &problem.scan[level];
-    let cells = problem.cells[level]
-        .get_or_init(|| CellGrid::new(problem.levels[level], problem.free[level]))
-        .as_ref();
+    let cells = problem.target.cells(level);
     let map = problem.levels[level];
     let free = problem.free[level];
     // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.
@@ -37,8 +33,15 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
         .map(|g| (g[0].r, g.iter().map(|c| c.t).collect()))
         .collect();
     let boxes: Vec<Option<TranslationBox>> = groups.iter().map(|(_, ts)| dense_box(ts)).collect();
-    let rows = match (cells, boxes.iter().any(Option::is_some)) {
-        (Some(c), true) => problem.rows[level].get_or_init(|| RowGrid::new(c)).as_ref(),
+    // The lookups the row grid would replace: every boxed group's poses, each voxel.
+    let boxed_lookups: u64 = groups
+        .iter()
+        .zip(&boxes)
+        .filter(|(_, b)| b.is_some())
+        .map(|((_, ts), _)| (ts.len() * scan.len()) as u64)
+        .sum();
+    let rows = match cells {
+        Some(_) if boxed_lookups > 0 => problem.target.rows(level, boxed_lookups),
         _ => None,
     };
     let scored: Vec<Vec<Scored>> = groups

@@ -2,7 +2,7 @@
 
 use std::sync::OnceLock;
 
-use super::score::DenseGrid;
+use super::score::{CellGrid, DenseGrid, RowGrid};
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::Pose;
@@ -27,6 +27,23 @@ pub struct SearchTarget {
     /// Per level, the occupied voxels as a dense grid, made when the agreement
     /// ([`super::consistency`]) first asks for it and dropped when a scan is added.
     occupied: Vec<OnceLock<Option<DenseGrid>>>,
+    /// Per level, what the search scores poses against (occupied and free cells, and the
+    /// same as rows), made when a search first needs it and dropped when a scan is added:
+    /// every search of an unchanged target (the upright look after the first search, a
+    /// mapper's attempts between placements) reuses it.
+    grids: Vec<LevelGrids>,
+}
+
+/// One level's search grids ([`SearchTarget::cells`], [`SearchTarget::rows`]).
+#[derive(Default)]
+struct LevelGrids {
+    cells: OnceLock<Option<CellGrid>>,
+    rows: OnceLock<Option<RowGrid>>,
+}
+
+/// Empty search-grid caches for a pyramid of `levels`.
+fn empty_grids(levels: usize) -> Vec<LevelGrids> {
+    (0..levels).map(|_| LevelGrids::default()).collect()
 }
 
 /// The largest box, in cells, of a level's [`SearchTarget::occupied_grid`] (2^28 bits =
@@ -42,6 +59,7 @@ impl SearchTarget {
             pyramid,
             free,
             occupied: (0..levels).map(|_| OnceLock::new()).collect(),
+            grids: empty_grids(levels),
         })
     }
 
@@ -61,6 +79,7 @@ impl SearchTarget {
             pyramid: Pyramid::new(OccupancyList::new(resolution)?, levels)?,
             free: (0..levels).map(|_| None).collect(),
             occupied: (0..levels).map(|_| OnceLock::new()).collect(),
+            grids: empty_grids(levels),
         };
         for (c, pose) in scans {
             t.add_scan(c, pose)?;
@@ -82,6 +101,7 @@ impl SearchTarget {
         self.occupied = (0..self.pyramid.levels())
             .map(|_| OnceLock::new())
             .collect();
+        self.grids = empty_grids(self.pyramid.levels());
         for level in 0..self.pyramid.levels() {
             let grid = self.free[level].take();
             self.free[level] = add_free_space(grid, cloud, pose, self.pyramid.level(level));
@@ -101,6 +121,40 @@ impl SearchTarget {
         self.occupied[level]
             .get_or_init(|| DenseGrid::occupied(self.pyramid.level(level), MAX_OCCUPIED_GRID_CELLS))
             .as_ref()
+    }
+
+    /// A level's occupied and free cells as the search scores them, made on first use;
+    /// `None` when the level's box is too large (the hash table and the free grid answer).
+    pub(crate) fn cells(&self, level: usize) -> Option<&CellGrid> {
+        self.grids[level]
+            .cells
+            .get_or_init(|| CellGrid::new(self.pyramid.level(level), self.free[level].as_ref()))
+            .as_ref()
+    }
+
+    /// [`SearchTarget::cells`] as rows, for scoring boxes of translations that would
+    /// otherwise take `lookups` cell lookups: the rows made before, or made now when the
+    /// lookups are at least as many as the level's cells (making them reads every cell
+    /// once; for fewer lookups the cells answer sooner, with the same counts). `None`
+    /// without cells or below that.
+    ///
+    /// Measured (3DTK scan001 onto scan000, 0.1 m, one thread): the finest level's rows
+    /// (16.7 M cells) took 59 ms to make, to score 2,532 poses of 2,516 voxels (6.4 M
+    /// lookups) that the cells score in a few milliseconds.
+    pub(crate) fn rows(&self, level: usize, lookups: u64) -> Option<&RowGrid> {
+        let slot = &self.grids[level].rows;
+        if let Some(made) = slot.get() {
+            return made.as_ref();
+        }
+        let cells = self.cells(level)?;
+        let [dx, dy, dz] = cells.dims();
+        let count = (dx as u64)
+            .saturating_mul(dy as u64)
+            .saturating_mul(dz as u64);
+        if lookups < count {
+            return None;
+        }
+        slot.get_or_init(|| RowGrid::new(cells)).as_ref()
     }
 
     /// The map pyramid.

@@ -1,15 +1,11 @@
 //! The scan and the target prepared for searching: parameter checks, the scan's voxel
 //! centres per level, the lattice's origin and steps, and the region's index counts.
 
-use std::sync::OnceLock;
-
 use nalgebra::{Point3, Vector3};
 
 use super::Lattice;
 use crate::align::params::{Dof, Region, SearchParams};
-use crate::align::score::CellGrid;
 use crate::align::score::DenseGrid;
-use crate::align::score::RowGrid;
 use crate::align::target::SearchTarget;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -20,12 +16,9 @@ use crate::occupancy::{OccupancyList, Pyramid};
 pub(crate) struct Problem<'a> {
     /// Scan voxel centres per level (sensor frame).
     pub(crate) scan: Vec<Vec<Point3<f64>>>,
-    /// Per level, built when first needed: the dense cells, or `None` when the box is too
-    /// large (the hash table of `levels` and the free grid answer instead).
-    pub(crate) cells: Vec<OnceLock<Option<CellGrid>>>,
-    /// Per level, built when first needed: the cells as rows for scoring boxes of
-    /// translations.
-    pub(crate) rows: Vec<OnceLock<Option<RowGrid>>>,
+    /// The target: its per-level dense cells and rows ([`SearchTarget::cells`],
+    /// [`SearchTarget::rows`]), made when first needed and kept for its later searches.
+    pub(crate) target: &'a SearchTarget,
     pub(crate) levels: Vec<&'a OccupancyList>,
     pub(crate) free: Vec<Option<&'a DenseGrid>>,
     pub(crate) lattice: Lattice,
@@ -233,8 +226,7 @@ pub(crate) fn prepare<'a>(
     let e = bbox.extent();
     Ok(Problem {
         scan,
-        cells: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
-        rows: (0..pyramid.levels()).map(|_| OnceLock::new()).collect(),
+        target,
         levels: (0..pyramid.levels()).map(|l| pyramid.level(l)).collect(),
         free: target.free.iter().map(Option::as_ref).collect(),
         lattice,
