@@ -561,3 +561,56 @@ fn a_two_way_sighting_a_metre_off_is_not_trusted_on_a_look_alike_in_its_window()
         }
     }
 }
+
+/// The same for a one-way sighting (issue 22): robot 1 saw robot 0's beacon (6.3), and the
+/// beacon it reports is 0.5 m off (lab seed 2, robot 0's four scans mapped first). The
+/// locus through the wrong beacon held a look-alike 0.62 m from the truth, trusted. A
+/// search 4 times as wide as a two-way window around that match finds the truth fitting
+/// the map better, and the scan waits; the true sighting still places it (within 5 cm).
+#[test]
+fn a_one_way_sighting_half_a_metre_off_is_not_trusted_on_a_look_alike_on_its_locus() {
+    let data = lab(2, 2, 4, OdometryNoise::degraded());
+    let truth = |r: usize, k: usize| data.robots[0].truth[0].inverse() * data.robots[r].truth[k];
+    let mount = olmap::mapping::TeamLinks::none(0).beacon_mount;
+    for shift in [0.0, 0.5] {
+        let mut mapper = team_mapper();
+        for k in 0..4 {
+            mapper
+                .add_linked_scan(scan_input(&data, 0, k), 0, k as u64, Vec::new())
+                .unwrap();
+        }
+        assert_eq!(mapper.placements().len(), 4, "robot 0's scans map alone");
+        // Robot 0's beacon (scan 2) as robot 1 saw it from its scan 2, moved `shift` in y.
+        let robot0_in_robot1 = truth(1, 2).inverse() * truth(0, 2);
+        let link = ScanLink::Saw {
+            other: 2,
+            observed: robot0_in_robot1.transform_point(&mount)
+                + nalgebra::Vector3::new(0.0, shift, 0.0),
+        };
+        let outcome = mapper
+            .add_linked_scan(scan_input(&data, 1, 2), 1, 2, vec![link])
+            .unwrap();
+        match outcome {
+            ScanOutcome::Placed(p) => {
+                let e = PoseError::between(&p.pose, &truth(1, 2));
+                assert!(
+                    e.translation_m <= 0.05,
+                    "beacon moved {shift} m: placed {:.3} m off via {:?}",
+                    e.translation_m,
+                    p.via
+                );
+            }
+            ScanOutcome::Waiting(w) => {
+                assert!(
+                    shift > 0.0,
+                    "the true sighting left the scan waiting: {w:?}"
+                );
+                assert!(
+                    w.reasons.iter().any(|r| r.contains("4 times as wide")),
+                    "{:?}",
+                    w.reasons
+                );
+            }
+        }
+    }
+}

@@ -12,8 +12,9 @@ use crate::mapping::links::{Placement, ScanLink};
 /// Linked scans whose links are searched per scan and attempt (the strongest first).
 const MAX_LINK_SEARCHES: usize = 2;
 
-/// A trusted match in a two-way sighting's window is looked at again in a window this many
-/// times as wide in x and y (`State::wider_look_vetoes`; ±1.2 m around the default ±0.3 m).
+/// A trusted match of a sighting is looked at again in a window this many times as wide in
+/// x and y as a two-way sighting's (`State::wider_look_vetoes`; ±1.2 m around the default
+/// ±0.3 m).
 pub const MUTUAL_CONFIRM_GROWTH: f64 = 4.0;
 
 impl State<'_> {
@@ -51,11 +52,9 @@ impl State<'_> {
                 equation: link.equation(),
                 other: link.other(),
             };
-            // A two-way sighting's window is small: a match in it is looked at once more
+            // A sighting's window or locus is narrow: a match in it is looked at once more
             // from farther out.
-            let vetoed = r.trusted
-                && matches!(link, ScanLink::Mutual { .. })
-                && self.wider_look_vetoes(s, &params, &mut r)?;
+            let vetoed = r.trusted && self.wider_look_vetoes(s, &params, &mut r)?;
             if r.trusted {
                 return Ok(Some(Found {
                     registration: r,
@@ -75,33 +74,43 @@ impl State<'_> {
         Ok(None)
     }
 
-    /// Whether a search [`MUTUAL_CONFIRM_GROWTH`] times as wide in x and y (twice in
-    /// heading) as the two-way sighting's window `params` finds a distinct pose that fits
-    /// the map clearly better than the trusted match `r` of that window (its fit refutes
-    /// `r`'s by the verdict's [`TrustThresholds::min_refutation`]) and agrees with it at
-    /// least as well; if so `r` is distrusted, saying why.
+    /// Whether a search around a sighting's trusted match `r` finds a distinct pose that
+    /// fits the map clearly better (its fit refutes `r`'s by the verdict's
+    /// [`TrustThresholds::min_refutation`]) and agrees with it at least as well; if so `r`
+    /// is distrusted, saying why. The search: for a two-way sighting, its window
+    /// [`MUTUAL_CONFIRM_GROWTH`] times as wide in x and y (twice in heading); for a one-way
+    /// sighting (a locus: a position or a circle), a window around the match as large as
+    /// that (the two-way window's size from [`TeamLinks::mutual_window`]).
     ///
-    /// Why: the window is the sighting's uncertainty (±0.3 m), so nothing outside it
-    /// competes with a match inside it. When the sighting is wrong by more (a failed
-    /// sensor, a beacon mistaken for another), a look-alike near the wrong pose can be
-    /// the best of the window, refined without a rival and trusted. In the simulated lab
-    /// (seed 1, two robots) a two-way sighting shifted 1.0 m placed the scan 1.0 m off as
-    /// a trusted match (overlap 13 %, agreement 0.894); the truth, 1 m away, fits the map
-    /// better by 8σ. A look-alike that fits about as well as the match (rows of desks) does
-    /// not veto it: resolving that ambiguity is what the sighting is for. Not done for an
-    /// untrusted match, before the sighting alone places the scan (`mutual_alone`): there
-    /// the map is often ambiguous along a wall, and its best fit lies 0.3-0.5 m from a
-    /// right sighting too (lab seed 1), so a wider look would refuse right sightings.
+    /// Why: the window or locus is the sighting's uncertainty (±0.3 m; 0.1 m off a locus),
+    /// so nothing outside it competes with a match inside it. When the sighting is wrong
+    /// by more (a failed sensor, a beacon mistaken for another), a look-alike near the
+    /// wrong pose can be the best of the window, refined without a rival and trusted. In
+    /// the simulated lab (seed 1, two robots) a two-way sighting shifted 1.0 m placed the
+    /// scan 1.0 m off as a trusted match (overlap 13 %, agreement 0.894); the truth, 1 m
+    /// away, fits the map better by 8σ. Seed 2, a one-way sighting (6.3) whose observed
+    /// beacon was moved 0.5 m: placed 0.62 m off, trusted. A look-alike that fits about as
+    /// well as the match (rows of desks) does not veto it: resolving that ambiguity is
+    /// what the sighting is for. Not done for an untrusted match, before the sighting alone
+    /// places the scan (`mutual_alone`): there the map is often ambiguous along a wall, and
+    /// its best fit lies 0.3-0.5 m from a right sighting too (lab seed 1), so a wider look
+    /// would refuse right sightings.
     ///
     /// [`TrustThresholds::min_refutation`]: crate::align::TrustThresholds::min_refutation
+    /// [`TeamLinks::mutual_window`]: crate::mapping::TeamLinks::mutual_window
     fn wider_look_vetoes(
         &self,
         s: usize,
         params: &RegisterParams,
         r: &mut Registration,
     ) -> Result<bool> {
-        let Region::Window { xy, z, yaw } = params.search.region else {
-            return Ok(false);
+        let (xy, z, yaw, around) = match params.search.region {
+            Region::Window { xy, z, yaw } => (xy, z, yaw, "two-way"),
+            Region::Locus(_) => {
+                let (xy, z, yaw) = self.team.mutual_window;
+                (xy, z, yaw, "one-way")
+            }
+            Region::Global => return Ok(false),
         };
         let mut wide = params.clone();
         wide.search.region = Region::Window {
@@ -109,6 +118,9 @@ impl State<'_> {
             z,
             yaw: (2.0 * yaw).min(std::f64::consts::PI),
         };
+        if matches!(params.search.region, Region::Locus(_)) {
+            wide.search.prior = r.pose;
+        }
         let w = self.run(s, &wide)?;
         let (Some(wv), Some(rv)) = (&w.verification, &r.verification) else {
             return Ok(false);
@@ -130,7 +142,7 @@ impl State<'_> {
         let d = won.pose().translation() - r.pose.translation();
         r.trusted = false;
         r.doubts.push(format!(
-            "a search {MUTUAL_CONFIRM_GROWTH:.0} times as wide around the two-way sighting \
+            "a search {MUTUAL_CONFIRM_GROWTH:.0} times as wide around the {around} sighting \
              finds a pose {:.2} m from this match that fits the map better by {margin:.1}σ: \
              the sighting or the match is wrong",
             d.norm()
