@@ -5,19 +5,25 @@ use std::time::Duration;
 
 use olmap_net::bench::{run_net_bench, NetBenchOptions};
 
-/// Every record published is placed, the lists are far smaller than the raw clouds, the
-/// latencies are ordered and span no longer than the run, and the report says the robots
-/// were out of step.
-#[test]
-fn robots_out_of_step_are_all_placed_with_latencies() {
-    let opts = NetBenchOptions {
+/// Seed 1's lab team, 3 robots x 3 stops, publishing out of step at 2 stops/s, bounded at
+/// two minutes.
+fn three_robots_out_of_step() -> NetBenchOptions {
+    NetBenchOptions {
         robots: 3,
         stops: 3,
         rate: 2.0,
         timeout: Duration::from_secs(120),
         staggered: true,
         ..Default::default()
-    };
+    }
+}
+
+/// Every record published is placed, the lists are far smaller than the raw clouds, the
+/// latencies are ordered and span no longer than the run, and the report says the robots
+/// were out of step.
+#[test]
+fn robots_out_of_step_are_all_placed_with_latencies() {
+    let opts = three_robots_out_of_step();
     let mut stages = Vec::new();
     let r = run_net_bench(&opts, |s| stages.push(s.to_string())).unwrap();
     assert!(r.staggered);
@@ -47,13 +53,8 @@ fn robots_out_of_step_are_all_placed_with_latencies() {
 #[test]
 fn a_mapper_reading_records_in_batches_places_them_as_one_reading_them_singly() {
     let opts = NetBenchOptions {
-        robots: 3,
-        stops: 3,
-        rate: 2.0,
-        timeout: Duration::from_secs(120),
-        staggered: true,
         settle: Duration::from_millis(1200),
-        ..Default::default()
+        ..three_robots_out_of_step()
     };
     let r = run_net_bench(&opts, |_| {}).unwrap();
     assert_eq!(r.published, 9, "{r:?}");
