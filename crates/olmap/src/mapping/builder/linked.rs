@@ -52,16 +52,22 @@ impl State<'_> {
                 equation: link.equation(),
                 other: link.other(),
             };
-            // A sighting's window or locus is narrow: a match in it is looked at once more
-            // from farther out.
-            let vetoed = r.trusted && self.wider_look_vetoes(s, &params, &mut r)?;
+            // A sighting's window or locus is narrow: a match that joins its robot to the
+            // map is looked at once more from farther out.
+            let vetoed =
+                r.trusted && !self.robot_placed(s) && self.wider_look_vetoes(s, &params, &mut r)?;
             if r.trusted {
                 return Ok(Some(Found {
                     registration: r,
                     via,
                 }));
             }
-            if let (ScanLink::Mutual { other, .. }, false) = (link, vetoed) {
+            // The sighting alone places a scan only when it joins its robot to the map: a
+            // placed robot's later scan has its odometry windows to try next, and the
+            // sighting alone put one 0.5-1.0 m off where the sighting was that wrong (lab
+            // seed 6) while odometry placed it right.
+            let joining = !self.robot_placed(s);
+            if let (ScanLink::Mutual { other, .. }, false, true) = (link, vetoed, joining) {
                 if let Some(alone) = self.mutual_alone(s, &prior, &r)? {
                     return Ok(Some(Found {
                         registration: alone,
@@ -81,6 +87,16 @@ impl State<'_> {
     /// [`MUTUAL_CONFIRM_GROWTH`] times as wide in x and y (twice in heading); for a one-way
     /// sighting (a locus: a position or a circle), a window around the match as large as
     /// that (the two-way window's size from [`TeamLinks::mutual_window`]).
+    ///
+    /// Only for a scan that joins its robot to the map (none of its robot's scans placed
+    /// yet): there the sighting is the only tie, and a wrong one puts the whole robot where
+    /// it says. A later scan of a placed robot meets its own robot's scans in the map, which
+    /// see most of what it sees: a pose a wrong sighting suggests leaves their surfaces in
+    /// its open space and fails the agreement (lab seeds 1, 2, 6, a later scan's sighting
+    /// moved 0.5 or 1.0 m: placed right by its odometry window). The look costs a window
+    /// search: in the live map's benchmark (`olmap bench --net`) the publish→placement
+    /// p95 was 0.35-0.42 s without it, 0.66-0.67 s with it for every sighting match, and
+    /// 0.49-0.52 s with it for joining scans only.
     ///
     /// Why: the window or locus is the sighting's uncertainty (±0.3 m; 0.1 m off a locus),
     /// so nothing outside it competes with a match inside it. When the sighting is wrong
@@ -191,11 +207,16 @@ impl State<'_> {
     /// [`TeamLinks::hold_unlinked`]: crate::mapping::TeamLinks::hold_unlinked
     pub(super) fn unlinked(&self, s: usize) -> bool {
         self.team.hold_unlinked
-            && !(0..self.scans.len())
-                .any(|i| self.poses[i].is_some() && self.team.frame[i] == self.team.frame[s])
+            && !self.robot_placed(s)
             && !self.team.links[s]
                 .iter()
                 .any(|l| self.poses[l.other()].is_some())
+    }
+
+    /// Whether a scan of scan `s`'s robot (its odometry frame) is placed.
+    fn robot_placed(&self, s: usize) -> bool {
+        (0..self.scans.len())
+            .any(|i| self.poses[i].is_some() && self.team.frame[i] == self.team.frame[s])
     }
 }
 
