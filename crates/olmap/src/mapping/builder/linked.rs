@@ -40,6 +40,9 @@ impl State<'_> {
         links: &[ScanLink],
         best: &mut Option<Found>,
     ) -> Result<Option<Found>> {
+        // Whether this scan would join its robot to the map (the wider look and the
+        // sighting-alone placement are for that scan only).
+        let joining = !self.robot_placed(s);
         for link in links.iter().take(MAX_LINK_SEARCHES) {
             let other_pose = self.poses[link.other()].expect("filtered");
             let (region, prior) = link.region(&other_pose, &self.team);
@@ -54,8 +57,7 @@ impl State<'_> {
             };
             // A sighting's window or locus is narrow: a match that joins its robot to the
             // map is looked at once more from farther out.
-            let vetoed =
-                r.trusted && !self.robot_placed(s) && self.wider_look_vetoes(s, &params, &mut r)?;
+            let vetoed = r.trusted && joining && self.wider_look_vetoes(s, &params, &mut r)?;
             if r.trusted {
                 return Ok(Some(Found {
                     registration: r,
@@ -66,7 +68,6 @@ impl State<'_> {
             // placed robot's later scan has its odometry windows to try next, and the
             // sighting alone put one 0.5-1.0 m off where the sighting was that wrong (lab
             // seed 6) while odometry placed it right.
-            let joining = !self.robot_placed(s);
             if let (ScanLink::Mutual { other, .. }, false, true) = (link, vetoed, joining) {
                 if let Some(alone) = self.mutual_alone(s, &prior, &r)? {
                     return Ok(Some(Found {
@@ -120,12 +121,11 @@ impl State<'_> {
         params: &RegisterParams,
         r: &mut Registration,
     ) -> Result<bool> {
-        let (xy, z, yaw, around) = match params.search.region {
-            Region::Window { xy, z, yaw } => (xy, z, yaw, "two-way"),
-            Region::Locus(_) => {
-                let (xy, z, yaw) = self.team.mutual_window;
-                (xy, z, yaw, "one-way")
-            }
+        // The window to widen and its centre: a two-way sighting's own; for a locus, the
+        // two-way size around the match.
+        let ((xy, z, yaw), centre, around) = match params.search.region {
+            Region::Window { xy, z, yaw } => ((xy, z, yaw), params.search.prior, "two-way"),
+            Region::Locus(_) => (self.team.mutual_window, r.pose, "one-way"),
             Region::Global => return Ok(false),
         };
         let mut wide = params.clone();
@@ -134,9 +134,7 @@ impl State<'_> {
             z,
             yaw: (2.0 * yaw).min(std::f64::consts::PI),
         };
-        if matches!(params.search.region, Region::Locus(_)) {
-            wide.search.prior = r.pose;
-        }
+        wide.search.prior = centre;
         let w = self.run(s, &wide)?;
         let (Some(wv), Some(rv)) = (&w.verification, &r.verification) else {
             return Ok(false);
