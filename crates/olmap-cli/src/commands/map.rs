@@ -442,9 +442,10 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
     println!("  graph edges: {:?}", report.edges);
     if report.loop_closure {
         println!(
-            "  loop closures: {} tried, {} accepted, {} down-weighted by the robust kernel",
+            "  loop closures: {} tried, {} accepted ({} along corridors: heading and position across only), {} down-weighted by the robust kernel",
             report.closures_tried,
             report.closures_accepted,
+            report.closures_partial,
             report.closures_down_weighted.len()
         );
     }

@@ -140,7 +140,7 @@ impl Default for CorrelativeParams {
 }
 
 /// The outcome of [`search`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CorrelativeMatch {
     /// The best pose `T_target_source`.
     pub pose: Se2,
@@ -148,7 +148,18 @@ pub struct CorrelativeMatch {
     pub score: f64,
     /// The best score among local maxima distinct from the best (0 when there is none).
     pub runner_up: f64,
+    /// The distinct local maxima scoring at least [`RIVAL_SHARE`] of the best, best first
+    /// (at most [`MAX_RIVALS`]): where the alternatives lie tells a corridor (all along
+    /// one line through the best, at its heading) from a repeated place.
+    pub rivals: Vec<(Se2, f64)>,
 }
+
+/// Distinct local maxima scoring at least this share of the best are kept as
+/// [`CorrelativeMatch::rivals`].
+pub const RIVAL_SHARE: f64 = 0.7;
+
+/// The most rivals kept.
+pub const MAX_RIVALS: usize = 32;
 
 impl CorrelativeMatch {
     /// `runner_up / score`: 1 = as good an alternative exists, 0 = the best stands alone.
@@ -253,11 +264,13 @@ pub fn search(
     // The runner-up: the best local maximum (not below any of its 26 neighbours) that is
     // distinct from the best.
     let mut runner_up = 0f64;
+    let mut rivals: Vec<(Se2, f64)> = Vec::new();
+    let rival_floor = RIVAL_SHARE * best.3;
     for k in 0..layers {
         for b in 0..side {
             for a in 0..side {
                 let v = scores[idx(a, b, k)];
-                if v <= runner_up {
+                if v <= runner_up && v < rival_floor {
                     continue;
                 }
                 let p = pose_of(a, b, k);
@@ -291,15 +304,21 @@ pub fn search(
                     }
                 }
                 if is_max {
-                    runner_up = v;
+                    runner_up = runner_up.max(v);
+                    if v >= rival_floor {
+                        rivals.push((p, v));
+                    }
                 }
             }
         }
     }
+    rivals.sort_by(|x, y| y.1.total_cmp(&x.1));
+    rivals.truncate(MAX_RIVALS);
     CorrelativeMatch {
         pose: best_pose,
         score: best.3.max(0.0),
         runner_up,
+        rivals,
     }
 }
 
@@ -362,5 +381,20 @@ mod tests {
             &CorrelativeParams::default(),
         );
         assert!(m.ambiguity() > 0.95, "{m:?}");
+        // The near-best rivals lie along the walls, at the best heading.
+        let near: Vec<_> = m.rivals.iter().filter(|r| r.1 > 0.95 * m.score).collect();
+        assert!(!near.is_empty());
+        for (p, _) in near {
+            assert!(
+                (p.y - m.pose.y).abs() <= 0.05 + 1e-9,
+                "{p:?} vs {:?}",
+                m.pose
+            );
+            assert!(
+                (p.theta - m.pose.theta).abs() < 1e-9,
+                "{p:?} vs {:?}",
+                m.pose
+            );
+        }
     }
 }

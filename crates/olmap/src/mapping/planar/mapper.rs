@@ -102,6 +102,13 @@ pub struct ClosureParams {
     /// weight once (a robust kernel alone would refuse a true correction of metres), and
     /// keep their kernel afterwards.
     pub corroboration_travel: f64,
+    /// Corridor closures: a closure whose only fault is that it cannot tell where along
+    /// a corridor it is — the search's near-best rivals all lie on one line through the
+    /// best at its heading, or the refinement holds one translation direction poorly —
+    /// becomes an edge with no information along that direction (it still holds the
+    /// heading and the position across the corridor, which is what a long loop's drift
+    /// needs). Off: such closures are refused as ambiguous.
+    pub partial: bool,
 }
 
 impl Default for ClosureParams {
@@ -126,6 +133,7 @@ impl Default for ClosureParams {
             yaw_drift_deg_per_metre: 0.2,
             max_window_yaw_deg: 30.0,
             corroboration_travel: 10.0,
+            partial: true,
         }
     }
 }
@@ -250,6 +258,9 @@ pub struct ClosureAttempt {
     pub correction_m: f64,
     /// Why it was refused, if it was.
     pub reason: Option<String>,
+    /// Whether it holds only the heading and the position across a corridor (see
+    /// [`ClosureParams::partial`]).
+    pub partial: bool,
     /// When this closure was a large correction confirmed by an earlier held one (see
     /// [`ClosureParams::corroboration_travel`]): that closure's earlier scan; both edges
     /// were added.
@@ -265,6 +276,8 @@ struct Closure {
     to: usize,
     t_from_to: Se2,
     information: Matrix3<f64>,
+    /// A partial closure's unobserved translation direction, in the frame of `from`.
+    weak: Option<Vector2<f64>>,
     /// The path travelled when it was found, metres.
     travel: f64,
 }
@@ -595,8 +608,30 @@ impl PlanarMapper {
                 ..*search_params
             };
             let m = search(&grid, source, coarse.pose, &fine);
+            // The coarse rivals, moved with the best by the fine step and scored on the
+            // fine scale.
+            let (dx, dy) = (m.pose.x - coarse.pose.x, m.pose.y - coarse.pose.y);
+            let dth = m.pose.theta - coarse.pose.theta;
+            let rescale = if coarse.score > 0.0 {
+                m.score / coarse.score
+            } else {
+                0.0
+            };
+            let rivals = coarse
+                .rivals
+                .iter()
+                .map(|(p, v)| {
+                    let q = Se2::new(
+                        p.x + dx,
+                        p.y + dy,
+                        crate::geometry::wrap_angle(p.theta + dth),
+                    );
+                    (q, v * rescale)
+                })
+                .collect();
             CorrelativeMatch {
                 runner_up: m.score * coarse.ambiguity(),
+                rivals,
                 ..m
             }
         } else {
@@ -723,6 +758,7 @@ impl PlanarMapper {
             inlier_fraction: 0.0,
             correction_m: 0.0,
             reason: None,
+            partial: false,
             corroborates: None,
             edge: None,
         };
@@ -734,22 +770,54 @@ impl PlanarMapper {
         attempt.ambiguity = m.ambiguity();
         attempt.inlier_fraction = r.inlier_fraction();
         attempt.correction_m = (r.pose.x - guess.x).hypot(r.pose.y - guess.y);
+        // A corridor: the search's near-best rivals all lie on one line through the best
+        // at its heading, or the refinement holds one translation direction poorly. The
+        // closure still holds the heading and the position across that direction.
+        let corridor = if !cp.partial || m.score < cp.min_score {
+            None
+        } else if m.ambiguity() > cp.max_ambiguity {
+            corridor_direction(&m, cp.max_ambiguity, window)
+        } else {
+            Some(r.weakest_direction())
+        };
+        let relaxed = RegistrationGate {
+            min_weakest_translation: 0.0,
+            ..cp.gate
+        };
+        let mut weak = None;
         attempt.reason = if m.score < cp.min_score {
             Some(format!("score {:.2} < {:.2}", m.score, cp.min_score))
         } else if m.ambiguity() > cp.max_ambiguity {
-            Some(format!(
-                "ambiguous: a distinct pose scores {:.0} % of the best",
-                100.0 * m.ambiguity()
-            ))
+            match (corridor, relaxed.doubt(&r)) {
+                (Some(u), None) => {
+                    weak = Some(u);
+                    None
+                }
+                _ => Some(format!(
+                    "ambiguous: a distinct pose scores {:.0} % of the best",
+                    100.0 * m.ambiguity()
+                )),
+            }
         } else {
-            cp.gate.doubt(&r)
+            match (cp.gate.doubt(&r), corridor, relaxed.doubt(&r)) {
+                (Some(_), Some(u), None) => {
+                    weak = Some(u);
+                    None
+                }
+                (doubt, _, _) => doubt,
+            }
         };
+        attempt.partial = weak.is_some();
         if attempt.reason.is_none() {
             let closure = Closure {
                 from: j,
                 to: i,
                 t_from_to: r.pose,
-                information: self.registration_information(&r),
+                information: match &weak {
+                    Some(u) => without_direction(&self.registration_information(&r), u),
+                    None => self.registration_information(&r),
+                },
+                weak,
                 travel: travel_i,
             };
             self.apply_or_hold(closure, &mut attempt, cp)?;
@@ -848,7 +916,26 @@ impl PlanarMapper {
         let via_a = af.compose(&a.t_from_to).compose(&at.inverse().compose(&bt));
         let via_b = bf.compose(&b.t_from_to);
         let path = (b.travel - a.travel).abs();
-        let dxy = (via_a.x - via_b.x).hypot(via_a.y - via_b.y);
+        // A partial closure says nothing along its corridor, so it can vouch only for
+        // another partial closure along the same corridor direction, and only across it
+        // (a partial closure along x would let a closure metres off in x through).
+        let world = |pose: &Se2, u: &Vector2<f64>| {
+            let (s, c) = pose.theta.sin_cos();
+            Vector2::new(c * u.x - s * u.y, s * u.x + c * u.y)
+        };
+        let mut d = Vector2::new(via_a.x - via_b.x, via_a.y - via_b.y);
+        match (a.weak, b.weak) {
+            (None, None) => {}
+            (Some(ua), Some(ub)) => {
+                let (ua, ub) = (world(&af, &ua), world(&bf, &ub));
+                if ua.dot(&ub).abs() < 0.9 {
+                    return false;
+                }
+                d -= ua * ua.dot(&d);
+            }
+            _ => return false,
+        }
+        let dxy = d.norm();
         let dth = crate::geometry::wrap_angle(via_a.theta - via_b.theta)
             .abs()
             .to_degrees();
@@ -856,8 +943,8 @@ impl PlanarMapper {
     }
 
     /// Adds a loop-closure edge `T_from_to` by hand, with the information and kernel the
-    /// accepted closures get (the first accepted closure's information; `None` when no
-    /// closure was accepted yet). For robustness tests: a wrong closure injected this way
+    /// accepted closures get (the first accepted full closure's information, not a
+    /// corridor closure's; `None` when no full closure was accepted yet). For robustness tests: a wrong closure injected this way
     /// must be down-weighted by the kernel at the next solve.
     pub fn add_closure_edge(
         &mut self,
@@ -873,7 +960,9 @@ impl PlanarMapper {
             .edges()
             .iter()
             .find_map(|e| match (e.kind, e.measurement) {
-                (EdgeKind::LoopClosure, crate::graph::Measurement::Se2 { information, .. }) => {
+                (EdgeKind::LoopClosure, crate::graph::Measurement::Se2 { information, .. })
+                    if !is_partial(&information) =>
+                {
                     Some(information)
                 }
                 _ => None,
@@ -945,12 +1034,54 @@ fn partial_step(r: &PlanarIcpResult, odometry: &Se2) -> (Se2, Vector2<f64>) {
     (Se2::new(t.x, t.y, r.pose.theta), u)
 }
 
+/// The direction of a corridor from a correlative search's near-best rivals (those above
+/// `max_ambiguity` of the best): `Some(u)` when they all lie on one line through the best
+/// pose at its heading (within one and a half search steps), `None` when any stands off
+/// that line or turned, or when there are none.
+fn corridor_direction(
+    m: &CorrelativeMatch,
+    max_ambiguity: f64,
+    window: &CorrelativeParams,
+) -> Option<Vector2<f64>> {
+    let near: Vec<(Vector2<f64>, f64)> = m
+        .rivals
+        .iter()
+        .filter(|(_, v)| *v > max_ambiguity * m.score)
+        .map(|(p, _)| {
+            (
+                Vector2::new(p.x - m.pose.x, p.y - m.pose.y),
+                crate::geometry::wrap_angle(p.theta - m.pose.theta).to_degrees(),
+            )
+        })
+        .collect();
+    let far = near
+        .iter()
+        .max_by(|a, b| a.0.norm_squared().total_cmp(&b.0.norm_squared()))?;
+    if far.0.norm() <= window.distinct_xy {
+        return None;
+    }
+    let u = far.0.normalize();
+    let cross_tol = 1.5 * window.step_xy + 0.05;
+    let yaw_tol = 1.5 * window.step_yaw_deg + 0.5;
+    near.iter()
+        .all(|(d, yaw)| (d.x * u.y - d.y * u.x).abs() <= cross_tol && yaw.abs() <= yaw_tol)
+        .then_some(u)
+}
+
 /// `info` with nothing left along the translation direction `u` (the projection
 /// `P·info·P`, `P = I − [u 0][u 0]ᵀ`).
 fn without_direction(info: &Matrix3<f64>, u: &Vector2<f64>) -> Matrix3<f64> {
     let w = nalgebra::Vector3::new(u.x, u.y, 0.0);
     let p = Matrix3::identity() - w * w.transpose();
     symmetric(p * info * p)
+}
+
+/// Whether an edge's information holds nothing along some translation direction (a
+/// corridor closure's, [`without_direction`]).
+fn is_partial(info: &Matrix3<f64>) -> bool {
+    let t: nalgebra::Matrix2<f64> = info.fixed_view::<2, 2>(0, 0).into_owned();
+    let e = t.symmetric_eigenvalues();
+    e.min() <= 1e-9 * e.max().abs().max(f64::MIN_POSITIVE)
 }
 
 fn symmetric(m: Matrix3<f64>) -> Matrix3<f64> {
@@ -996,6 +1127,52 @@ mod tests {
         // … and everything across and in heading kept.
         assert!(((a.transpose() * p * a)[0] - (a.transpose() * h * a)[0]).abs() < 1e-9);
         assert!((p[(2, 2)] - h[(2, 2)]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_corridor_is_told_from_a_repeated_place_by_where_the_rivals_lie() {
+        let window = CorrelativeParams {
+            step_xy: 0.1,
+            step_yaw_deg: 1.0,
+            ..CorrelativeParams::default()
+        };
+        let best = Se2::new(2.0, 1.0, 0.3);
+        let along = Vector2::new(0.6, 0.8);
+        let m = |rivals: Vec<(Se2, f64)>| CorrelativeMatch {
+            pose: best,
+            score: 0.9,
+            runner_up: rivals.iter().map(|r| r.1).fold(0.0, f64::max),
+            rivals,
+        };
+        let at = |s: f64, across: f64, dyaw_deg: f64| {
+            Se2::new(
+                best.x + s * along.x - across * along.y,
+                best.y + s * along.y + across * along.x,
+                best.theta + dyaw_deg.to_radians(),
+            )
+        };
+        // Rivals 1.5 m and 3 m either way along one line, within a step of it: a corridor.
+        let corridor = m(vec![
+            (at(1.5, 0.05, 0.0), 0.88),
+            (at(-3.0, -0.1, 1.0), 0.87),
+            (at(3.0, 0.0, 0.0), 0.86),
+        ]);
+        let u = corridor_direction(&corridor, 0.85, &window).expect("a corridor");
+        assert!(u.dot(&along).abs() > 0.999, "{u}");
+        // A weak rival off the line does not count (below the ambiguity) …
+        let mut weak_off = corridor.clone();
+        weak_off.rivals.push((at(1.0, 2.0, 0.0), 0.70));
+        assert!(corridor_direction(&weak_off, 0.85, &window).is_some());
+        // … a strong one does: a second place, not a corridor.
+        let mut off = corridor.clone();
+        off.rivals.push((at(1.0, 2.0, 0.0), 0.80));
+        assert!(corridor_direction(&off, 0.85, &window).is_none());
+        // A rival on the line but turned 6°: not the same corridor view.
+        let turned = m(vec![(at(2.0, 0.0, 6.0), 0.88)]);
+        assert!(corridor_direction(&turned, 0.85, &window).is_none());
+        // Only a rival in heading (no translation along anything): not a corridor.
+        let spun = m(vec![(at(0.1, 0.0, 8.0), 0.88)]);
+        assert!(corridor_direction(&spun, 0.85, &window).is_none());
     }
 
     #[test]

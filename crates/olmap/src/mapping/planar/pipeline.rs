@@ -123,6 +123,9 @@ pub struct PlanarLogReport {
     pub closures_tried: usize,
     /// Loop closures accepted as edges.
     pub closures_accepted: usize,
+    /// Accepted closure attempts that hold only the heading and the position across a
+    /// corridor ([`super::mapper::ClosureParams::partial`]).
+    pub closures_partial: usize,
     /// Refused closure attempts by reason (the reason's first words).
     pub closures_refused: BTreeMap<String, usize>,
     /// Accepted closures that the robust kernel down-weighted at the end.
@@ -230,7 +233,7 @@ pub fn run_planar_log(
     params.odometry_noise = job.noise;
     let mut mapper = PlanarMapper::new(params);
     let mut sources: BTreeMap<String, usize> = BTreeMap::new();
-    let (mut tried, mut accepted) = (0, 0);
+    let (mut tried, mut accepted, mut partial) = (0, 0, 0);
     let mut max_ms = 0f64;
     let mut refused: BTreeMap<String, usize> = BTreeMap::new();
     let mut reg_refused: BTreeMap<String, usize> = BTreeMap::new();
@@ -255,6 +258,7 @@ pub fn run_planar_log(
             tried += 1;
             if c.accepted {
                 accepted += 1 + usize::from(c.corroborates.is_some());
+                partial += usize::from(c.partial);
             } else if let Some(r) = &c.reason {
                 *refused.entry(reason_head(r)).or_default() += 1;
             }
@@ -343,6 +347,7 @@ pub fn run_planar_log(
         loop_closure: job.params.closure.is_some(),
         closures_tried: tried,
         closures_accepted: accepted,
+        closures_partial: partial,
         closures_refused: refused,
         closures_down_weighted: down,
         injected_closures,
