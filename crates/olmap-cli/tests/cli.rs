@@ -1420,6 +1420,36 @@ fn audit_map_report_dir_checked_before_compute_cli() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
 
+/// Found mapping a 2D log with `-o m.olm`: the planar pipeline mapped the whole log and
+/// wrote the poses before finding it could not write a cloud named `.olm`. Now the map's
+/// format is checked first and nothing is written.
+#[test]
+fn a_2d_log_map_with_an_unknown_cloud_format_fails_before_writing_anything() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("m.olm");
+    let poses = dir.path().join("p.txt");
+    let out = olmap(&[
+        "map",
+        d.join("carmen_2d/intel-corrected.log.gz").to_str().unwrap(),
+        "--dof",
+        "xy-yaw",
+        "--max-scans",
+        "20",
+        "-o",
+        map.to_str().unwrap(),
+        "--poses-out",
+        poses.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("m.olm") && err.contains("cannot tell the output format"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
 fn small_store(robots: u32, seqs: u32) -> olmap::team::ScanStore {
     let mut s = olmap::team::ScanStore::new();
     for robot in 0..robots {

@@ -558,6 +558,23 @@ pub fn read_cloud_from<R: BufRead>(
 #[cfg(not(feature = "las"))]
 const NO_LAS: &str = "LAS/LAZ: olmap was built without the `las` feature";
 
+/// The format [`write_cloud`] would write `path` in: `options.format`, or the one its
+/// extension names. Callers check it before long work, so that a bad output name fails
+/// before anything is computed or written.
+pub fn output_format(path: &Path, options: &WriteOptions) -> Result<CloudFormat> {
+    if let Some(f) = options.format {
+        return Ok(f);
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    CloudFormat::from_extension(ext).ok_or_else(|| Error::UnknownFormat {
+        path: path.to_path_buf(),
+        reason: format!(
+            "cannot tell the output format from the extension '{ext}'; known: {}",
+            CloudFormat::list_extensions()
+        ),
+    })
+}
+
 /// Writes a point cloud, choosing the format from the file name (or `options.format`).
 /// The file appears complete or not at all.
 pub fn write_cloud(
@@ -566,19 +583,7 @@ pub fn write_cloud(
     options: &WriteOptions,
 ) -> Result<()> {
     let path = path.as_ref();
-    let format = match options.format {
-        Some(f) => f,
-        None => {
-            let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-            CloudFormat::from_extension(ext).ok_or_else(|| Error::UnknownFormat {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "cannot tell the output format from the extension '{ext}'; known: {}",
-                    CloudFormat::list_extensions()
-                ),
-            })?
-        }
-    };
+    let format = output_format(path, options)?;
     let laz_by_name;
     let options = if format == CloudFormat::Las && options.laz.is_none() {
         laz_by_name = WriteOptions {

@@ -219,6 +219,9 @@ pub fn run_planar_log(
     {
         crate::file::check_output(out, "output")?;
     }
+    if let Some(path) = &job.map_out {
+        crate::io::output_format(path, &Default::default())?;
+    }
     let log = read_carmen(&job.log)?;
     let n = job.max_scans.unwrap_or(usize::MAX).min(log.scans.len());
     let reference: Vec<Se2> = log.scans[..n]
