@@ -276,7 +276,7 @@ struct Closure {
     to: usize,
     t_from_to: Se2,
     information: Matrix3<f64>,
-    /// A partial closure's unobserved translation direction, in the frame of `from`.
+    /// A corridor closure's unobserved translation direction, in the frame of `from`.
     weak: Option<Vector2<f64>>,
     /// The path travelled when it was found, metres.
     travel: f64,
@@ -844,10 +844,17 @@ impl PlanarMapper {
         }
         self.held
             .retain(|h| closure.travel - h.travel <= cp.corroboration_travel);
-        let agreeing = self
-            .held
-            .iter()
-            .position(|h| h.from != closure.from && self.agree(h, &closure));
+        // Two bare corridors side by side look alike from inside, and each corridor closure
+        // from one onto the other would "confirm" the last: a corridor closure confirms
+        // nothing, and a held one is confirmed only by a full closure (evidence from a
+        // place that tells itself apart), compared across the corridor and in heading.
+        let agreeing = match closure.weak {
+            Some(_) => None,
+            None => self
+                .held
+                .iter()
+                .position(|h| h.from != closure.from && self.agree(h, &closure)),
+        };
         let Some(k) = agreeing else {
             attempt.reason = Some(format!(
                 "large correction (chi2 {chi2:.0} at the current estimate): held until a second closure agrees"
@@ -916,24 +923,12 @@ impl PlanarMapper {
         let via_a = af.compose(&a.t_from_to).compose(&at.inverse().compose(&bt));
         let via_b = bf.compose(&b.t_from_to);
         let path = (b.travel - a.travel).abs();
-        // A partial closure says nothing along its corridor, so it can vouch only for
-        // another partial closure along the same corridor direction, and only across it
-        // (a partial closure along x would let a closure metres off in x through).
-        let world = |pose: &Se2, u: &Vector2<f64>| {
-            let (s, c) = pose.theta.sin_cos();
-            Vector2::new(c * u.x - s * u.y, s * u.x + c * u.y)
-        };
+        // A held corridor closure says nothing along its corridor: compare across it.
         let mut d = Vector2::new(via_a.x - via_b.x, via_a.y - via_b.y);
-        match (a.weak, b.weak) {
-            (None, None) => {}
-            (Some(ua), Some(ub)) => {
-                let (ua, ub) = (world(&af, &ua), world(&bf, &ub));
-                if ua.dot(&ub).abs() < 0.9 {
-                    return false;
-                }
-                d -= ua * ua.dot(&d);
-            }
-            _ => return false,
+        if let Some(u) = a.weak {
+            let (s, c) = af.theta.sin_cos();
+            let u = Vector2::new(c * u.x - s * u.y, s * u.x + c * u.y);
+            d -= u * u.dot(&d);
         }
         let dxy = d.norm();
         let dth = crate::geometry::wrap_angle(via_a.theta - via_b.theta)
