@@ -926,8 +926,7 @@ impl PlanarMapper {
         // A held corridor closure says nothing along its corridor: compare across it.
         let mut d = Vector2::new(via_a.x - via_b.x, via_a.y - via_b.y);
         if let Some(u) = a.weak {
-            let (s, c) = af.theta.sin_cos();
-            let u = Vector2::new(c * u.x - s * u.y, s * u.x + c * u.y);
+            let u = transform(&Se2::new(0.0, 0.0, af.theta), &u);
             d -= u * u.dot(&d);
         }
         let dxy = d.norm();
@@ -939,8 +938,9 @@ impl PlanarMapper {
 
     /// Adds a loop-closure edge `T_from_to` by hand, with the information and kernel the
     /// accepted closures get (the first accepted full closure's information, not a
-    /// corridor closure's; `None` when no full closure was accepted yet). For robustness tests: a wrong closure injected this way
-    /// must be down-weighted by the kernel at the next solve.
+    /// corridor closure's; `None` when no full closure was accepted yet). For robustness
+    /// tests: a wrong closure injected this way must be down-weighted by the kernel at the
+    /// next solve.
     pub fn add_closure_edge(
         &mut self,
         from: usize,
