@@ -9,11 +9,13 @@
 //! every ordering and tie is resolved by the pose indices, so the result is the same for
 //! any number of threads.
 
+use nalgebra::{Point3, Rotation3};
 use rayon::prelude::*;
 
 use super::lattice::{key_of, rank, region_counts, threshold, Cand, Lattice, Problem, Scored};
 use super::params::{Dof, Locus, Region, SearchParams};
 use super::score::DenseGrid;
+use super::target::SearchCells;
 use crate::error::Result;
 use crate::geometry::VoxelKey;
 use crate::occupancy::{OccupancyList, Pyramid};
@@ -23,7 +25,6 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
     let l = &problem.lattice;
     let cell = l.cell(level);
     let scan = &problem.scan[level];
-    let cells = problem.target.cells(level);
     let map = problem.levels[level];
     let free = problem.free[level];
     // Group by rotation (sorted: deterministic). Every caller's candidates come sorted.
@@ -40,20 +41,22 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
         .filter(|(_, b)| b.is_some())
         .map(|((_, ts), _)| (ts.len() * scan.len()) as u64)
         .sum();
-    let rows = match cells {
-        Some(_) if boxed_lookups > 0 => problem.target.rows(level, boxed_lookups),
-        _ => None,
+    let rows = match boxed_lookups {
+        0 => None,
+        n => problem.target.rows(level, n),
     };
+    let cells = match rows {
+        Some(_) => problem.target.cells(level).map(SearchCells::Whole),
+        None => problem
+            .target
+            .cells_reaching(level, reach(l, scan, &groups, level)),
+    };
+    let cells = cells.as_deref();
     let scored: Vec<Vec<Scored>> = groups
         .par_iter()
         .zip(&boxes)
         .map(|((r, ts), bx)| {
-            let probe = Cand {
-                r: *r,
-                t: [0, 0, 0],
-            };
-            let [yaw, pitch, roll] = l.angles(&probe, level);
-            let rot = crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll);
+            let rot = group_rotation(l, *r, level);
             let base: Vec<[i64; 3]> = scan.iter().map(|c| key_of(&rot, c, l.t0, cell)).collect();
             let by_box = rows
                 .zip(bx.as_ref())
@@ -80,6 +83,59 @@ pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<S
         })
         .collect();
     scored.into_iter().flatten().collect()
+}
+
+/// The rotation of the candidates with rotation index `r` at `level`.
+fn group_rotation(l: &Lattice, r: [i32; 3], level: usize) -> Rotation3<f64> {
+    let [yaw, pitch, roll] = l.angles(&Cand { r, t: [0, 0, 0] }, level);
+    crate::geometry::rotation_from_yaw_pitch_roll(yaw, pitch, roll)
+}
+
+/// A key box holding every key the groups look up at `level`: per group, the scan's
+/// bounding box turned by the group's rotation (its eight corners) and moved by the
+/// group's translations, with a cell to spare on each side for rounding.
+fn reach(
+    l: &Lattice,
+    scan: &[Point3<f64>],
+    groups: &[([i32; 3], Vec<[i32; 3]>)],
+    level: usize,
+) -> ([i64; 3], [i64; 3]) {
+    let cell = l.cell(level);
+    let mut smin = Point3::from([f64::INFINITY; 3]);
+    let mut smax = Point3::from([f64::NEG_INFINITY; 3]);
+    for p in scan {
+        smin = smin.inf(p);
+        smax = smax.sup(p);
+    }
+    let mut lo = [i64::MAX; 3];
+    let mut hi = [i64::MIN; 3];
+    if scan.is_empty() {
+        return ([0; 3], [0; 3]);
+    }
+    for (r, ts) in groups {
+        let rot = group_rotation(l, *r, level);
+        let mut kmin = [i64::MAX; 3];
+        let mut kmax = [i64::MIN; 3];
+        for corner in 0..8 {
+            let c = Point3::new(
+                if corner & 1 == 0 { smin.x } else { smax.x },
+                if corner & 2 == 0 { smin.y } else { smax.y },
+                if corner & 4 == 0 { smin.z } else { smax.z },
+            );
+            let k = key_of(&rot, &c, l.t0, cell);
+            for i in 0..3 {
+                kmin[i] = kmin[i].min(k[i]);
+                kmax[i] = kmax[i].max(k[i]);
+            }
+        }
+        for t in ts {
+            for i in 0..3 {
+                lo[i] = lo[i].min(kmin[i] - 1 + t[i] as i64);
+                hi[i] = hi[i].max(kmax[i] + 1 + t[i] as i64);
+            }
+        }
+    }
+    (lo, hi)
 }
 
 /// The translations of a rotation group as a box: its first corner and size.

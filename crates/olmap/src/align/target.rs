@@ -1,6 +1,7 @@
 //! What a search aligns against: a map pyramid, and the free space seen by its scans.
 
-use std::sync::OnceLock;
+use std::ops::Deref;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use super::score::{CellGrid, DenseGrid, RowGrid};
 use crate::cloud::PointCloud;
@@ -34,11 +35,63 @@ pub struct SearchTarget {
     grids: Vec<LevelGrids>,
 }
 
-/// One level's search grids ([`SearchTarget::cells`], [`SearchTarget::rows`]).
+/// One level's search grids ([`SearchTarget::cells`], [`SearchTarget::cells_reaching`],
+/// [`SearchTarget::rows`]).
 #[derive(Default)]
 struct LevelGrids {
+    /// [`CellGrid::whole_box`].
+    whole_box: OnceLock<Option<KeyBox>>,
     cells: OnceLock<Option<CellGrid>>,
+    part: Mutex<PartCells>,
     rows: OnceLock<Option<RowGrid>>,
+}
+
+/// A key box `[lo, hi]`.
+type KeyBox = ([i64; 3], [i64; 3]);
+
+/// The last [`CellGrid`] a level made over part of its box, and how many it made.
+#[derive(Default)]
+struct PartCells {
+    grid: Option<Arc<CellGrid>>,
+    made: u32,
+}
+
+/// A level's cells as [`SearchTarget::cells_reaching`] gives them: the whole level's, or a
+/// grid over the part of it the candidates reach.
+pub(crate) enum SearchCells<'a> {
+    /// [`SearchTarget::cells`].
+    Whole(&'a CellGrid),
+    /// A grid over a box holding every key the candidates look up.
+    Part(Arc<CellGrid>),
+}
+
+impl Deref for SearchCells<'_> {
+    type Target = CellGrid;
+
+    fn deref(&self) -> &CellGrid {
+        match self {
+            SearchCells::Whole(g) => g,
+            SearchCells::Part(g) => g,
+        }
+    }
+}
+
+/// Levels whose whole box is at most this many cells (2 MiB at one bit) are always made
+/// whole: small enough that a part would save nothing worth a second grid.
+const MIN_PART_WORTHY_CELLS: u64 = 1 << 24;
+
+/// A part is made only when it is at most this fraction of the whole box.
+const PART_SHARE: u64 = 2;
+
+/// After this many parts of a level, the next miss makes the whole grid: a target searched
+/// again and again in different places (a mapper's attempts) pays for the whole once.
+const MAX_PARTS: u32 = 2;
+
+/// Cells in the key box `[lo, hi]` (saturating).
+fn box_cells((lo, hi): KeyBox) -> u64 {
+    (0..3).fold(1u64, |n, i| {
+        n.saturating_mul((hi[i] - lo[i] + 1).max(0) as u64)
+    })
 }
 
 /// Empty search-grid caches for a pyramid of `levels`.
@@ -132,6 +185,71 @@ impl SearchTarget {
             .as_ref()
     }
 
+    /// [`CellGrid::whole_box`] of a level, found on first use.
+    fn whole_box(&self, level: usize) -> Option<KeyBox> {
+        *self.grids[level].whole_box.get_or_init(|| {
+            CellGrid::whole_box(self.pyramid.level(level), self.free[level].as_ref())
+        })
+    }
+
+    /// The cells a search scores against when every key it looks up lies in `reach`: the
+    /// whole level's ([`SearchTarget::cells`]) when they were made before, when the level
+    /// is small, or when `reach` covers more than a quarter of it; otherwise a grid over
+    /// `reach` within the level's box (the last one is kept and reused while later reaches
+    /// fit in it). Both score the same; the part costs a fraction of the whole to make.
+    /// `None` when the level is empty or its box too large, as for the whole.
+    ///
+    /// Measured (libpointmatcher car 401 onto 400, six degrees of freedom, one thread): the
+    /// target spans 127 x 131 x 40 m, so its finest level's whole grid is 662 M cells (83
+    /// MB), made for candidates reaching a fraction of it.
+    pub(crate) fn cells_reaching(&self, level: usize, reach: KeyBox) -> Option<SearchCells<'_>> {
+        let slot = &self.grids[level];
+        if let Some(whole) = slot.cells.get() {
+            return whole.as_ref().map(SearchCells::Whole);
+        }
+        let (lo, hi) = self.whole_box(level)?;
+        let whole_cells = box_cells((lo, hi));
+        // Keys outside the whole box score nothing in either grid, so the part needs only
+        // the reach inside it; an axis it misses altogether gets any one cell of the box.
+        let mut plo = [0; 3];
+        let mut phi = [0; 3];
+        for i in 0..3 {
+            (plo[i], phi[i]) = (lo[i].max(reach.0[i]), hi[i].min(reach.1[i]));
+            if phi[i] < plo[i] {
+                (plo[i], phi[i]) = (lo[i], lo[i]);
+            }
+        }
+        let part_cells = box_cells((plo, phi));
+        let whole = || self.cells(level).map(SearchCells::Whole);
+        if whole_cells <= MIN_PART_WORTHY_CELLS
+            || part_cells.saturating_mul(PART_SHARE) > whole_cells
+        {
+            return whole();
+        }
+        let mut part = slot.part.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(g) = part.grid.as_ref().filter(|g| g.covers(plo, phi)) {
+            return Some(SearchCells::Part(Arc::clone(g)));
+        }
+        if part.made >= MAX_PARTS {
+            drop(part);
+            return whole();
+        }
+        let made = CellGrid::over(
+            self.pyramid.level(level),
+            self.free[level].as_ref(),
+            plo,
+            phi,
+        );
+        let Some(made) = made else {
+            drop(part);
+            return whole();
+        };
+        let made = Arc::new(made);
+        part.grid = Some(Arc::clone(&made));
+        part.made += 1;
+        Some(SearchCells::Part(made))
+    }
+
     /// [`SearchTarget::cells`] as rows, for scoring boxes of translations that would
     /// otherwise take `lookups` cell lookups: the rows made before, or made now when the
     /// lookups are at least as many as the level's cells (making them reads every cell
@@ -146,14 +264,10 @@ impl SearchTarget {
         if let Some(made) = slot.get() {
             return made.as_ref();
         }
-        let cells = self.cells(level)?;
-        let [dx, dy, dz] = cells.dims();
-        let count = (dx as u64)
-            .saturating_mul(dy as u64)
-            .saturating_mul(dz as u64);
-        if lookups < count {
+        if lookups < box_cells(self.whole_box(level)?) {
             return None;
         }
+        let cells = self.cells(level)?;
         slot.get_or_init(|| RowGrid::new(cells)).as_ref()
     }
 
@@ -213,4 +327,86 @@ fn add_free_space(
         grid.clear(k.x as i64, k.y as i64, k.z as i64);
     }
     Some(grid)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::align::score::cells::tests::lcg;
+    use crate::geometry::VoxelKey;
+
+    /// A target whose one level spans 401 x 401 x 201 cells (past
+    /// [`MIN_PART_WORTHY_CELLS`]), with voxels scattered through it.
+    fn large_target() -> SearchTarget {
+        let mut map = OccupancyList::new(0.1).unwrap();
+        let mut s = 9u64;
+        map.set(VoxelKey::new(0, 0, 0), 1).unwrap();
+        map.set(VoxelKey::new(400, 400, 200), 1).unwrap();
+        for _ in 0..20000 {
+            let k = [lcg(&mut s) % 401, lcg(&mut s) % 401, lcg(&mut s) % 201];
+            map.set(VoxelKey::new(k[0] as i32, k[1] as i32, k[2] as i32), 1)
+                .unwrap();
+        }
+        SearchTarget::from_map(map, 1).unwrap()
+    }
+
+    /// A small reach gets a part that scores as the whole grid; a reach inside the kept
+    /// part reuses it; a reach over half the box, or a miss after [`MAX_PARTS`] parts,
+    /// gets the whole grid.
+    #[test]
+    fn searches_reaching_a_small_part_of_a_large_level_get_a_part() {
+        let target = large_target();
+        let small = ([100, 120, 40], [180, 200, 90]);
+        let part = target.cells_reaching(0, small).unwrap();
+        assert!(matches!(part, SearchCells::Part(_)));
+        assert!(part.covers(small.0, small.1) && !part.covers([0; 3], [400, 400, 200]));
+        // Inside the part, it scores as the whole.
+        let mut s = 4u64;
+        let base: Vec<[i64; 3]> = (0..300)
+            .map(|_| {
+                [
+                    110 + lcg(&mut s) % 60,
+                    130 + lcg(&mut s) % 60,
+                    50 + lcg(&mut s) % 30,
+                ]
+            })
+            .collect();
+        let ts: Vec<[i32; 3]> = (0..30)
+            .map(|_| {
+                [
+                    (lcg(&mut s) % 11 - 5) as i32,
+                    (lcg(&mut s) % 11 - 5) as i32,
+                    (lcg(&mut s) % 9 - 4) as i32,
+                ]
+            })
+            .collect();
+        let whole = CellGrid::new(target.pyramid().level(0), None).unwrap();
+        let want = whole.score(&base, &ts);
+        assert!(want.iter().any(|c| c.0 > 0), "the test must hit something");
+        assert_eq!(part.score(&base, &ts), want);
+        // A reach inside the kept part reuses it.
+        let inner = target
+            .cells_reaching(0, ([120, 130, 50], [150, 160, 60]))
+            .unwrap();
+        match (&part, &inner) {
+            (SearchCells::Part(a), SearchCells::Part(b)) => assert!(Arc::ptr_eq(a, b)),
+            _ => panic!("a reach inside the part gets the part"),
+        }
+        // Over half the box: the whole grid (not made yet, so a second part is possible).
+        let wide = target.cells_reaching(0, ([-50, -50, -50], [300, 450, 250]));
+        assert!(matches!(wide, Some(SearchCells::Whole(_))));
+        let target = large_target();
+        for k in 0..MAX_PARTS as i64 {
+            let reach = ([10 * k, 0, 0], [10 * k + 50, 50, 50]);
+            assert!(matches!(
+                target.cells_reaching(0, reach),
+                Some(SearchCells::Part(_))
+            ));
+        }
+        let after = target.cells_reaching(0, ([300, 300, 100], [350, 350, 150]));
+        assert!(matches!(after, Some(SearchCells::Whole(_))));
+        // Once the whole grid is made, every reach gets it.
+        let again = target.cells_reaching(0, ([0, 0, 0], [50, 50, 50]));
+        assert!(matches!(again, Some(SearchCells::Whole(_))));
+    }
 }

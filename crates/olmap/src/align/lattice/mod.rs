@@ -124,9 +124,21 @@ impl Lattice {
 pub(crate) const KEY_CLAMP: f64 = (1u64 << 40) as f64;
 
 /// `floor(v / cell)` as a key, clamped to [`KEY_CLAMP`] (NaN gives 0).
+///
+/// The floor is taken by truncating and stepping down below a negative fraction, the same
+/// value as `f64::floor` for every clamped input (integers up to 2^40 convert exactly):
+/// without SSE4.1 in the build target `floor` is a libm call, and the search's scoring
+/// makes three per scan voxel and rotation (5 % of a six-degree-of-freedom alignment's
+/// samples).
 #[inline]
 pub(crate) fn cell_index(v: f64, cell: f64) -> i64 {
-    (v / cell).floor().clamp(-KEY_CLAMP, KEY_CLAMP) as i64
+    let x = (v / cell).clamp(-KEY_CLAMP, KEY_CLAMP);
+    let k = x as i64;
+    if (k as f64) > x {
+        k - 1
+    } else {
+        k
+    }
 }
 
 /// The cell of a scan voxel centre `c` rotated by `rot` and moved by `t0`: the one formula
@@ -144,4 +156,40 @@ pub(crate) fn key_of(
         cell_index(p.y, cell),
         cell_index(p.z, cell),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The truncating floor equals `f64::floor` then the clamp, on integers, halves,
+    /// values a rounding step either side of integers, both signs, far values, infinities
+    /// and NaN.
+    #[test]
+    fn cell_index_is_the_clamped_floor() {
+        let mut values = vec![0.0, -0.0, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
+        for k in [
+            -1e13, -3e9, -70.0, -2.0, -1.0, 0.0, 1.0, 5.0, 123456.0, 2e12, 1.1e12,
+        ] {
+            for v in [
+                k,
+                k + 0.5,
+                k - 0.5,
+                k * (1.0 + f64::EPSILON),
+                k * (1.0 - f64::EPSILON),
+            ] {
+                values.extend([
+                    v,
+                    f64::from_bits(v.to_bits() + 1),
+                    f64::from_bits(v.to_bits().saturating_sub(1)),
+                ]);
+            }
+        }
+        for v in values {
+            for cell in [1.0, 0.1, 0.05, 12.8] {
+                let want = (v / cell).floor().clamp(-KEY_CLAMP, KEY_CLAMP) as i64;
+                assert_eq!(cell_index(v, cell), want, "{v} / {cell}");
+            }
+        }
+    }
 }

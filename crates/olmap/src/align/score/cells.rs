@@ -37,25 +37,51 @@ fn spread(v: u32) -> u64 {
 }
 
 impl CellGrid {
-    /// The cells of a level and its free space, or `None` when the level is empty or the
-    /// box is too large for a dense array ([`DenseGrid::MAX_CELLS`]).
+    /// The cells of a level and its free space over [`CellGrid::whole_box`], or `None` when
+    /// the level is empty or the box is too large for a dense array
+    /// ([`DenseGrid::MAX_CELLS`]).
     pub fn new(level: &OccupancyList, free: Option<&DenseGrid>) -> Option<Self> {
-        let Some(free) = free else {
-            return Some(Self::one_bit(DenseGrid::new(level)?));
-        };
+        let (lo, hi) = Self::whole_box(level, free)?;
+        Self::over(level, free, lo, hi)
+    }
+
+    /// The key box of a level's voxels and its free space together (`None` when the level
+    /// is empty): where every lookup that can hit or conflict lands.
+    pub fn whole_box(
+        level: &OccupancyList,
+        free: Option<&DenseGrid>,
+    ) -> Option<([i64; 3], [i64; 3])> {
         let (mut lo, mut hi) = DenseGrid::key_box(level)?;
-        let (flo, fhi) = free.bounds();
-        for i in 0..3 {
-            lo[i] = lo[i].min(flo[i]);
-            hi[i] = hi[i].max(fhi[i]);
+        if let Some(free) = free {
+            let (flo, fhi) = free.bounds();
+            for i in 0..3 {
+                lo[i] = lo[i].min(flo[i]);
+                hi[i] = hi[i].max(fhi[i]);
+            }
         }
+        Some((lo, hi))
+    }
+
+    /// The cells of a level and its free space inside the key box `[lo, hi]` (cells
+    /// outside it score as empty), or `None` when the box is empty or too large. Scores of
+    /// keys that all lie in `[lo, hi]` or outside [`CellGrid::whole_box`] equal those of
+    /// [`CellGrid::new`].
+    pub fn over(
+        level: &OccupancyList,
+        free: Option<&DenseGrid>,
+        lo: [i64; 3],
+        hi: [i64; 3],
+    ) -> Option<Self> {
         let occupied = DenseGrid::over(level, lo, hi)?;
-        let grown;
-        let free = if (flo, fhi) == (lo, hi) {
+        let Some(free) = free else {
+            return Some(Self::one_bit(occupied));
+        };
+        let windowed;
+        let free = if free.bounds() == (lo, hi) {
             free
         } else {
-            grown = free.grown(lo, hi)?;
-            &grown
+            windowed = free.window(lo, hi)?;
+            &windowed
         };
         let (o, f) = (occupied.words(), free.words());
         let mut words = Vec::with_capacity(2 * o.len());
@@ -69,6 +95,11 @@ impl CellGrid {
         g.words = words;
         g.two_bits = true;
         Some(g)
+    }
+
+    /// Whether the key box `[lo, hi]` lies inside this grid's box.
+    pub fn covers(&self, lo: [i64; 3], hi: [i64; 3]) -> bool {
+        (0..3).all(|i| lo[i] >= self.min[i] && hi[i] < self.min[i] + self.dims[i])
     }
 
     fn one_bit(grid: DenseGrid) -> Self {
@@ -91,10 +122,14 @@ impl CellGrid {
         for chunk in ts.chunks(CHUNK) {
             let mut hits = [0u32; CHUNK];
             let mut conflicts = [0u32; CHUNK];
-            if self.two_bits {
-                self.score_chunk::<true>(base, chunk, &mut hits, &mut conflicts);
-            } else {
-                self.score_chunk::<false>(base, chunk, &mut hits, &mut conflicts);
+            let mut offset = [0i64; CHUNK];
+            let moves = self.moves(chunk, &mut offset);
+            for &b in base {
+                if self.two_bits {
+                    self.add_key::<true>(b, &moves, &mut hits, &mut conflicts);
+                } else {
+                    self.add_key::<false>(b, &moves, &mut hits, &mut conflicts);
+                }
             }
             out.extend(hits.into_iter().zip(conflicts).take(chunk.len()));
         }
@@ -138,16 +173,9 @@ impl CellGrid {
         }
     }
 
-    #[inline(always)]
-    fn score_chunk<const TWO: bool>(
-        &self,
-        base: &[[i64; 3]],
-        ts: &[[i32; 3]],
-        hits: &mut [u32; CHUNK],
-        conflicts: &mut [u32; CHUNK],
-    ) {
-        let n = ts.len();
-        let mut offset = [0i64; CHUNK];
+    /// The translations `ts` as index offsets (written to `offset`, as long as `ts`) and
+    /// their bounding box.
+    fn moves<'a>(&self, ts: &'a [[i32; 3]], offset: &'a mut [i64]) -> Moves<'a> {
         let mut lo = [i64::MAX; 3];
         let mut hi = [i64::MIN; 3];
         for (o, t) in offset.iter_mut().zip(ts) {
@@ -158,38 +186,63 @@ impl CellGrid {
                 hi[i] = hi[i].max(t[i]);
             }
         }
-        let offset = &offset[..n];
-        for b in base {
-            let rel = [0, 1, 2].map(|i| b[i] - self.min[i]);
-            let inside = (0..3).all(|i| rel[i] + lo[i] >= 0 && rel[i] + hi[i] < self.dims[i]);
-            if inside {
-                let at = rel[0] * self.stride[0] + rel[1] * self.stride[1] + rel[2];
-                for (j, o) in offset.iter().enumerate() {
-                    let s = self.state::<TWO>(at + o);
-                    hits[j] += s & 1;
-                    if TWO {
-                        conflicts[j] += s >> 1;
-                    }
+        Moves {
+            ts,
+            offset: &offset[..ts.len()],
+            lo,
+            hi,
+        }
+    }
+
+    /// Adds the hits and conflicts of the key `b` moved by each of `moves` to `hits[j]` and
+    /// `conflicts[j]` (`j` indexing the translations).
+    #[inline(always)]
+    fn add_key<const TWO: bool>(
+        &self,
+        b: [i64; 3],
+        moves: &Moves,
+        hits: &mut [u32],
+        conflicts: &mut [u32],
+    ) {
+        let (lo, hi) = (moves.lo, moves.hi);
+        let rel = [0, 1, 2].map(|i| b[i] - self.min[i]);
+        let inside = (0..3).all(|i| rel[i] + lo[i] >= 0 && rel[i] + hi[i] < self.dims[i]);
+        if inside {
+            let at = rel[0] * self.stride[0] + rel[1] * self.stride[1] + rel[2];
+            for ((o, h), c) in moves.offset.iter().zip(hits).zip(conflicts) {
+                let s = self.state::<TWO>(at + o);
+                *h += s & 1;
+                if TWO {
+                    *c += s >> 1;
                 }
-                continue;
             }
-            let outside = (0..3).any(|i| rel[i] + hi[i] < 0 || rel[i] + lo[i] >= self.dims[i]);
-            if outside {
-                continue;
-            }
-            // Straddling the box's edge: test each translation.
-            for (j, t) in ts.iter().enumerate() {
-                let k = [0, 1, 2].map(|i| rel[i] + t[i] as i64);
-                if (0..3).all(|i| k[i] >= 0 && k[i] < self.dims[i]) {
-                    let s = self.state::<TWO>(k[0] * self.stride[0] + k[1] * self.stride[1] + k[2]);
-                    hits[j] += s & 1;
-                    if TWO {
-                        conflicts[j] += s >> 1;
-                    }
+            return;
+        }
+        let outside = (0..3).any(|i| rel[i] + hi[i] < 0 || rel[i] + lo[i] >= self.dims[i]);
+        if outside {
+            return;
+        }
+        // Straddling the box's edge: test each translation.
+        for ((t, h), c) in moves.ts.iter().zip(hits).zip(conflicts) {
+            let k = [0, 1, 2].map(|i| rel[i] + t[i] as i64);
+            if (0..3).all(|i| k[i] >= 0 && k[i] < self.dims[i]) {
+                let s = self.state::<TWO>(k[0] * self.stride[0] + k[1] * self.stride[1] + k[2]);
+                *h += s & 1;
+                if TWO {
+                    *c += s >> 1;
                 }
             }
         }
     }
+}
+
+/// Translations prepared for [`CellGrid::add_key`]: each as an index offset, and their
+/// bounding box.
+struct Moves<'a> {
+    ts: &'a [[i32; 3]],
+    offset: &'a [i64],
+    lo: [i64; 3],
+    hi: [i64; 3],
 }
 
 #[cfg(test)]
@@ -236,7 +289,8 @@ pub(crate) mod tests {
                 lcg(&mut s) % 6 - 1,
             );
         }
-        let occupied = DenseGrid::new(&level).unwrap();
+        let (lo, hi) = DenseGrid::key_box(&level).unwrap();
+        let occupied = DenseGrid::over(&level, lo, hi).unwrap();
         let base: Vec<[i64; 3]> = (0..150)
             .map(|_| {
                 [
@@ -273,6 +327,74 @@ pub(crate) mod tests {
             assert!(got.iter().any(|g| g.0 > 0), "the test must hit something");
             if with_free {
                 assert!(got.iter().any(|g| g.1 > 0), "and conflict somewhere");
+            }
+        }
+    }
+
+    /// A grid over any box holding every moved key scores as the whole grid, with and
+    /// without free space: the box the searches build when their candidates reach a small
+    /// part of a large target.
+    #[test]
+    fn a_grid_over_the_reached_box_scores_as_the_whole() {
+        let mut s = 3u64;
+        let mut level = OccupancyList::new(0.1).unwrap();
+        for _ in 0..3000 {
+            let k = [
+                lcg(&mut s) % 90 - 40,
+                lcg(&mut s) % 70 - 20,
+                lcg(&mut s) % 20 - 5,
+            ];
+            level
+                .set(VoxelKey::new(k[0] as i32, k[1] as i32, k[2] as i32), 1)
+                .unwrap();
+        }
+        let mut free = DenseGrid::empty([-50, -30, -8], [60, 55, 20]).unwrap();
+        for _ in 0..20000 {
+            free.set(
+                lcg(&mut s) % 111 - 50,
+                lcg(&mut s) % 86 - 30,
+                lcg(&mut s) % 29 - 8,
+            );
+        }
+        let base: Vec<[i64; 3]> = (0..200)
+            .map(|_| [lcg(&mut s) % 12, lcg(&mut s) % 9 - 3, lcg(&mut s) % 6 - 2])
+            .collect();
+        let ts: Vec<[i32; 3]> = (0..40)
+            .map(|_| {
+                [
+                    (lcg(&mut s) % 5) as i32,
+                    (lcg(&mut s) % 7 - 3) as i32,
+                    (lcg(&mut s) % 3) as i32,
+                ]
+            })
+            .collect();
+        // The reached box: every base key moved by every translation.
+        let mut lo = [i64::MAX; 3];
+        let mut hi = [i64::MIN; 3];
+        for b in &base {
+            for t in &ts {
+                for i in 0..3 {
+                    lo[i] = lo[i].min(b[i] + t[i] as i64);
+                    hi[i] = hi[i].max(b[i] + t[i] as i64);
+                }
+            }
+        }
+        for with_free in [false, true] {
+            let free = with_free.then_some(&free);
+            let whole = CellGrid::new(&level, free).unwrap();
+            let want = whole.score(&base, &ts);
+            assert!(want.iter().any(|g| g.0 > 0), "the test must hit something");
+            for (plo, phi) in [
+                (lo, hi),
+                ([lo[0] - 3, lo[1], lo[2] - 1], [hi[0], hi[1] + 2, hi[2]]),
+            ] {
+                let part = CellGrid::over(&level, free, plo, phi).unwrap();
+                assert!(part.covers(lo, hi) && !whole.covers([-60, 0, 0], [0, 0, 0]));
+                assert_eq!(
+                    part.score(&base, &ts),
+                    want,
+                    "box {plo:?}..{phi:?}, free {with_free}"
+                );
             }
         }
     }

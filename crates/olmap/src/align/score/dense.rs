@@ -23,12 +23,6 @@ impl DenseGrid {
     /// The largest box, in cells, worth a dense grid (2^31 bits = 256 MiB).
     pub const MAX_CELLS: u64 = 1 << 31;
 
-    /// The grid of a list, or `None` when it is empty or its box is too large.
-    pub fn new(list: &OccupancyList) -> Option<Self> {
-        let (lo, hi) = Self::key_box(list)?;
-        Self::over(list, lo, hi)
-    }
-
     /// The voxels of a list with a count above zero, over their key box, or `None` when
     /// there are none or the box holds more than `max_cells` cells.
     pub fn occupied(list: &OccupancyList, max_cells: u64) -> Option<Self> {
@@ -111,19 +105,29 @@ impl DenseGrid {
         if nlo == a && nhi == b {
             return Some(self.clone());
         }
-        let mut g = Self::empty(nlo, nhi)?;
-        for x in 0..self.dims[0] {
-            for y in 0..self.dims[1] {
-                for z in 0..self.dims[2] {
-                    let i = (x * self.dims[1] + y) * self.dims[2] + z;
-                    if self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1 {
-                        g.set(
-                            self.min[0] + x as i64,
-                            self.min[1] + y as i64,
-                            self.min[2] + z as i64,
-                        );
-                    }
-                }
+        self.window(nlo, nhi)
+    }
+
+    /// A grid over the key box `[lo, hi]` with this grid's cells inside it set (cells of
+    /// `[lo, hi]` outside this grid's box are clear), or `None` when `[lo, hi]` is empty or
+    /// too large. Copies a run of bits per `(x, y)` column, a word at a time.
+    pub fn window(&self, lo: [i64; 3], hi: [i64; 3]) -> Option<Self> {
+        let mut g = Self::empty(lo, hi)?;
+        let (a, b) = self.bounds();
+        let from = [0, 1, 2].map(|i| a[i].max(lo[i]));
+        let to = [0, 1, 2].map(|i| b[i].min(hi[i]));
+        if (0..3).any(|i| to[i] < from[i]) {
+            return Some(g);
+        }
+        let run = (to[2] - from[2] + 1) as u64;
+        for x in from[0]..=to[0] {
+            for y in from[1]..=to[1] {
+                // Both corners lie in both boxes.
+                let (Some(src), Some(dst)) = (self.index(x, y, from[2]), g.index(x, y, from[2]))
+                else {
+                    unreachable!("the column's first cell lies in both boxes")
+                };
+                copy_bits(&self.bits, src, &mut g.bits, dst, run);
             }
         }
         Some(g)
@@ -199,6 +203,36 @@ impl DenseGrid {
     }
 }
 
+/// ORs `len` bits of `src` starting at bit `from` into `dst` starting at bit `to`, 64 at a
+/// time (bit `i` of a slice is bit `i % 64` of word `i / 64`).
+fn copy_bits(src: &[u64], from: u64, dst: &mut [u64], to: u64, len: u64) {
+    let mut done = 0;
+    while done < len {
+        let n = (len - done).min(64) as u32;
+        let v = read_bits(src, from + done, n);
+        let at = to + done;
+        let (w, s) = ((at / 64) as usize, (at % 64) as u32);
+        dst[w] |= v << s;
+        if s > 0 && s + n > 64 {
+            dst[w + 1] |= v >> (64 - s);
+        }
+        done += n as u64;
+    }
+}
+
+/// `n` (1 to 64) bits of `words` from bit `at`, in the low bits of the result.
+fn read_bits(words: &[u64], at: u64, n: u32) -> u64 {
+    let (w, s) = ((at / 64) as usize, (at % 64) as u32);
+    let mut v = words[w] >> s;
+    if s > 0 && s + n > 64 {
+        v |= words[w + 1] << (64 - s);
+    }
+    if n < 64 {
+        v &= (1u64 << n) - 1;
+    }
+    v
+}
+
 /// A [`DenseGrid`] that many threads mark at once ([`DenseGrid::par_set`]).
 pub(crate) struct SharedCells<'a> {
     grid: &'a DenseGrid,
@@ -216,6 +250,54 @@ impl SharedCells<'_> {
             let bit = 1 << (i % 64);
             if word.load(Ordering::Relaxed) & bit == 0 {
                 word.fetch_or(bit, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::align::score::cells::tests::lcg;
+
+    /// A window copies exactly the cells inside both boxes, whatever the bit offsets of
+    /// the columns (boxes shifted, shrunk, grown and disjoint; columns shorter and longer
+    /// than a word).
+    #[test]
+    fn windows_hold_exactly_the_cells_inside_both_boxes() {
+        let mut s = 5u64;
+        for (lo, hi) in [([-3, 2, -70], [9, 7, 61]), ([0, 0, 0], [4, 3, 9])] {
+            let mut g = DenseGrid::empty(lo, hi).unwrap();
+            let span = [0, 1, 2].map(|i| hi[i] - lo[i] + 1);
+            for _ in 0..2000 {
+                let k = [0, 1, 2].map(|i| lo[i] + lcg(&mut s) % span[i]);
+                g.set(k[0], k[1], k[2]);
+            }
+            let windows = [
+                (lo, hi),
+                (
+                    [lo[0] + 1, lo[1] - 2, lo[2] + 5],
+                    [hi[0] - 2, hi[1] + 1, hi[2] + 40],
+                ),
+                ([lo[0] - 4, lo[1], lo[2] - 63], [hi[0], hi[1], lo[2] + 1]),
+                ([hi[0] + 1, lo[1], lo[2]], [hi[0] + 3, hi[1], hi[2]]),
+            ];
+            for (wlo, whi) in windows {
+                let w = g.window(wlo, whi).unwrap();
+                assert_eq!(w.bounds(), (wlo, whi));
+                for x in wlo[0] - 1..=whi[0] + 1 {
+                    for y in wlo[1] - 1..=whi[1] + 1 {
+                        for z in wlo[2] - 1..=whi[2] + 1 {
+                            let inside =
+                                (0..3).all(|i| [x, y, z][i] >= wlo[i] && [x, y, z][i] <= whi[i]);
+                            assert_eq!(
+                                w.contains(x, y, z),
+                                inside && g.contains(x, y, z),
+                                "cell {x} {y} {z} of window {wlo:?}..{whi:?}"
+                            );
+                        }
+                    }
+                }
             }
         }
     }

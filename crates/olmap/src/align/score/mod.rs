@@ -4,7 +4,7 @@
 //! pass over the scan, and [`RowGrid`] the same cells as rows for scoring a whole box of
 //! translations at once.
 
-mod cells;
+pub(super) mod cells;
 mod dense;
 mod rows;
 
