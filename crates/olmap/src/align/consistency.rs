@@ -175,7 +175,6 @@ impl Consistency {
 fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) -> SideAgreement {
     let res = other.resolution();
     let levels = other.pyramid().levels();
-    let tol = ANGULAR_TOLERANCE.tan();
     let own_grid = DenseGrid::occupied(mine, MAX_LOCAL_GRID_CELLS);
     let own = own_grid
         .as_ref()
@@ -187,9 +186,7 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         let mut side = SideAgreement::default();
         let mut through = Vec::new();
         for &k in chunk {
-            // The level whose cell covers the angular tolerance at this range.
-            let d = (mine.center(k) - origin).norm();
-            let level = ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1);
+            let level = level_at((mine.center(k) - origin).norm(), res, levels);
             let f = 1i32 << level;
             let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
             let occ = other.occupied_grid(level).map_or(
@@ -235,6 +232,20 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         }
     }
     side
+}
+
+/// The level [`count_side`] checks a voxel `d` metres from its sensor at: the one whose
+/// cell covers [`ANGULAR_TOLERANCE`] at that range (of `levels`, at `res` metres finest).
+fn level_at(d: f64, res: f64, levels: usize) -> usize {
+    let tol = ANGULAR_TOLERANCE.tan();
+    ((d * tol / res).max(1.0).log2().ceil() as usize).min(levels - 1)
+}
+
+/// How far from its sensor [`count_side`] checks voxels at `level` ([`level_at`]): up to
+/// `2^level * res / tan(ANGULAR_TOLERANCE)` metres, everywhere at the coarsest level
+/// (`None`).
+fn checked_within(level: usize, res: f64, levels: usize) -> Option<f64> {
+    (level + 1 < levels).then(|| (1u64 << level) as f64 * res / ANGULAR_TOLERANCE.tan())
 }
 
 /// Voxels per parallel work item of [`count_side`].
@@ -323,8 +334,17 @@ pub fn consistency(
 /// What the source saw, for the target side of [`consistency_seen`]: its surfaces and free
 /// space at `target`'s finest resolution, in its own frame (the same for every pose, so a
 /// caller checking several poses builds it once).
+///
+/// The counts check a level's free space only up to the range that level stands for (a
+/// voxel 20 m out is checked at 0.4 m, one 3 m out at the finest level), so the view's rays
+/// are traced at a level only that far (and a few cells more): every cell the counts read
+/// is as [`SearchTarget::from_cloud`] makes it. Measured on the libpointmatcher car scan
+/// (25,000 points, 8 levels at 0.1 m, one thread): 88 ms traced whole.
 pub fn source_view(source: &PointCloud, target: &SearchTarget) -> Result<SearchTarget> {
-    SearchTarget::from_cloud(source, target.resolution(), target.pyramid().levels())
+    let (res, levels) = (target.resolution(), target.pyramid().levels());
+    SearchTarget::from_cloud_read_within(source, res, levels, &|level| {
+        checked_within(level, res, levels)
+    })
 }
 
 /// [`consistency`] with the source's view prepared ([`source_view`]; `None` skips the
@@ -486,5 +506,117 @@ mod tests {
         let list = scene();
         assert!(DenseGrid::occupied(&list, 1000).is_none());
         assert!(DenseGrid::occupied(&OccupancyList::new(0.1).unwrap(), 1 << 20).is_none());
+    }
+
+    /// A hall 50 x 36 m with walls 3 m high, its floor and walls every 0.2 m, and square
+    /// pillars 0.6 m wide at `pillars`, seen from `origin`.
+    fn hall(pillars: &[(f32, f32)], origin: Point3<f64>) -> PointCloud {
+        let mut points = Vec::new();
+        for i in 0..250 {
+            for j in 0..180 {
+                points.push(Point3::new(
+                    i as f32 * 0.2 - 25.0,
+                    j as f32 * 0.2 - 18.0,
+                    0.0,
+                ));
+            }
+        }
+        for h in 0..15 {
+            let z = h as f32 * 0.2;
+            for i in 0..250 {
+                let x = i as f32 * 0.2 - 25.0;
+                points.extend([Point3::new(x, -18.0, z), Point3::new(x, 18.0, z)]);
+            }
+            for j in 0..180 {
+                let y = j as f32 * 0.2 - 18.0;
+                points.extend([Point3::new(-25.0, y, z), Point3::new(25.0, y, z)]);
+            }
+            for &(px, py) in pillars {
+                for s in 0..4 {
+                    let a = s as f32 * 0.2 - 0.3;
+                    points.extend([
+                        Point3::new(px + a, py - 0.3, z),
+                        Point3::new(px + a, py + 0.3, z),
+                        Point3::new(px - 0.3, py + a, z),
+                        Point3::new(px + 0.3, py + a, z),
+                    ]);
+                }
+            }
+        }
+        PointCloud::from_points(points).with_origin(origin)
+    }
+
+    /// The source's view traced only as far as each level is read gives the same counts
+    /// as the view traced whole, for the right pose and wrong ones (contradictions
+    /// included), while tracing less.
+    #[test]
+    fn a_view_traced_as_far_as_it_is_read_counts_as_one_traced_whole() {
+        let pillars = [
+            (3.0, 2.0),
+            (-8.0, 5.0),
+            (12.0, -6.0),
+            (-15.0, -10.0),
+            (20.0, 9.0),
+        ];
+        let target_cloud = hall(&pillars, Point3::new(0.0, 0.0, 1.5));
+        // The source: some pillars gone, one new, seen from 1.3 m away.
+        let source_cloud = hall(
+            &[(3.0, 2.0), (12.0, -6.0), (-4.0, -3.0)],
+            Point3::new(1.0, 0.8, 1.5),
+        );
+        // At 0.25 m the points 0.2 m apart make surfaces; level 0 is read up to 14.3 m.
+        let levels = 4;
+        let target = SearchTarget::from_cloud(&target_cloud, 0.25, levels).unwrap();
+        let whole = SearchTarget::from_cloud(&source_cloud, 0.25, levels).unwrap();
+        let read = source_view(&source_cloud, &target).unwrap();
+        let bits = |t: &SearchTarget, level: usize| -> u32 {
+            t.free[level]
+                .as_ref()
+                .map_or(0, |g| g.words().iter().map(|w| w.count_ones()).sum())
+        };
+        assert!(
+            bits(&read, 0) < bits(&whole, 0) / 2,
+            "the finest level is traced much less"
+        );
+        assert_eq!(
+            bits(&read, levels - 1),
+            bits(&whole, levels - 1),
+            "the coarsest whole"
+        );
+        let mut contradicted = 0;
+        for pose in [
+            Pose::identity(),
+            Pose::from_xyz_ypr(0.3, -0.2, 0.0, 0.02, 0.0, 0.0),
+            Pose::from_xyz_ypr(2.0, 1.0, 0.1, 0.3, 0.01, -0.02),
+            Pose::from_xyz_ypr(-6.0, 4.0, 0.0, -1.2, 0.0, 0.0),
+            // Walls brought across the source's hall, near it and far.
+            Pose::from_xyz_ypr(20.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            Pose::from_xyz_ypr(0.0, 15.0, 0.0, 0.1, 0.0, 0.0),
+            Pose::from_xyz_ypr(0.0, 28.0, 0.0, 0.0, 0.0, 0.0),
+        ] {
+            let a = consistency_seen(
+                &source_cloud,
+                Some(&whole),
+                &target,
+                Some(&target_cloud),
+                &pose,
+            )
+            .unwrap();
+            let b = consistency_seen(
+                &source_cloud,
+                Some(&read),
+                &target,
+                Some(&target_cloud),
+                &pose,
+            )
+            .unwrap();
+            let (a, b) = (a.target.unwrap(), b.target.unwrap());
+            assert_eq!(a, b, "pose {pose:?}");
+            contradicted += a.contradicted;
+        }
+        assert!(
+            contradicted > 0,
+            "the wrong poses must contradict somewhere"
+        );
     }
 }

@@ -147,6 +147,33 @@ impl SearchTarget {
     /// A point whose voxel key is outside the representable range is an error naming it
     /// ([`OccupancyList::check_keys`]): a target never silently loses points.
     pub fn add_scan(&mut self, cloud: &PointCloud, pose: &Pose) -> Result<()> {
+        self.add_scan_within(cloud, pose, &|_| None)
+    }
+
+    /// A target from one scan in its own frame whose free space at a level is read only
+    /// within `read_within(level)` metres of the scan's origin (`None`: everywhere): rays
+    /// are traced at that level only as far as that, plus what [`add_free_space`] adds.
+    /// Every cell read there is as [`SearchTarget::from_cloud`] makes it; the grids are
+    /// made or not as there too.
+    pub(crate) fn from_cloud_read_within(
+        cloud: &PointCloud,
+        resolution: f64,
+        levels: usize,
+        read_within: &dyn Fn(usize) -> Option<f64>,
+    ) -> Result<Self> {
+        let mut t = Self::from_scans(&[], resolution, levels)?;
+        t.add_scan_within(cloud, &Pose::identity(), read_within)?;
+        Ok(t)
+    }
+
+    /// [`SearchTarget::add_scan`] tracing each level's rays only as far as `read_within`
+    /// says ([`SearchTarget::from_cloud_read_within`]).
+    fn add_scan_within(
+        &mut self,
+        cloud: &PointCloud,
+        pose: &Pose,
+        read_within: &dyn Fn(usize) -> Option<f64>,
+    ) -> Result<()> {
         let mut endpoints = OccupancyList::new(self.pyramid.base().resolution())?;
         endpoints.check_keys(cloud, pose, "the target")?;
         endpoints.add_points(cloud, pose, 1);
@@ -157,7 +184,8 @@ impl SearchTarget {
         self.grids = empty_grids(self.pyramid.levels());
         for level in 0..self.pyramid.levels() {
             let grid = self.free[level].take();
-            self.free[level] = add_free_space(grid, cloud, pose, self.pyramid.level(level));
+            let level_list = self.pyramid.level(level);
+            self.free[level] = add_free_space(grid, cloud, pose, level_list, read_within(level));
         }
         Ok(())
     }
@@ -282,14 +310,27 @@ impl SearchTarget {
     }
 }
 
+/// Cells a ray is traced past `read_within` in [`add_free_space`]: a cell's half diagonal
+/// twice (where a ray enters it against its centre, and the centre against the point read)
+/// and a face neighbour (√3 + 1 < 3).
+const TRACE_PAST_READ_CELLS: f64 = 3.0;
+
 /// Adds the cells crossed by a scan's rays at the level's resolution (minus the last
 /// [`FREE_SPACE_MARGIN`] of each ray) to a free-space grid, then clears every occupied cell
-/// of the level. `None` when the grid would be too large.
+/// of the level. `None` when the grid would be too large (the box is the whole scan's
+/// whatever `read_within` says).
+///
+/// With `read_within`, a ray stops at the first cell it enters farther than that plus
+/// three cells from the origin: every cell whose centre lies within `read_within` plus a
+/// cell's half diagonal and one face neighbour is entered before that (a cell's centre is
+/// at most half its diagonal from where a ray enters it), so those cells are as the whole
+/// ray leaves them.
 fn add_free_space(
     grid: Option<DenseGrid>,
     cloud: &PointCloud,
     pose: &Pose,
     level: &OccupancyList,
+    read_within: Option<f64>,
 ) -> Option<DenseGrid> {
     let cell = level.resolution();
     let skip = (FREE_SPACE_MARGIN / cell).ceil() as usize + 1;
@@ -315,9 +356,18 @@ fn add_free_space(
     };
     grid.par_set(moved.points(), |pts, cells| {
         for p in pts {
-            let ray = VoxelRay::new(&origin, &p.cast(), cell);
-            let n = ray.remaining() as usize;
-            for k in ray.take(n.saturating_sub(skip)) {
+            let end = p.cast();
+            let mut ray = VoxelRay::new(&origin, &end, cell);
+            let n = (ray.remaining() as usize).saturating_sub(skip);
+            // The segment parameter (0 at the origin, 1 at the point) to stop past.
+            let stop = read_within.map_or(f64::INFINITY, |r| {
+                (r + TRACE_PAST_READ_CELLS * cell) / (end - origin).norm()
+            });
+            for _ in 0..n {
+                let Some(k) = ray.next() else { break };
+                if ray.entry() > stop {
+                    break;
+                }
                 cells.set(k.x as i64, k.y as i64, k.z as i64);
             }
         }
