@@ -59,7 +59,9 @@ pub struct Registration {
     pub trusted: bool,
     /// The trust tests that failed, in words.
     pub doubts: Vec<String>,
-    /// Wall time of the whole registration, seconds.
+    /// Wall time of the whole registration, seconds: from the call to its answer, the
+    /// search target's preparation included for [`register`] and [`localize`] (not for the
+    /// functions given a prepared target).
     pub seconds: f64,
 }
 
@@ -191,10 +193,14 @@ pub fn register(
     target: &PointCloud,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    let start = Instant::now();
     params.search.validate()?;
     let levels = levels_for_clouds(source, target, &params.search);
     let t = SearchTarget::from_cloud(target, params.search.resolution, levels)?;
-    register_to(source, &t, target, params)
+    let mut r = register_to(source, &t, target, params)?;
+    // The whole registration, the target's preparation included.
+    r.seconds = start.elapsed().as_secs_f64();
+    Ok(r)
 }
 
 /// [`register`] against a prepared search target (e.g. a growing map), refining against
