@@ -509,10 +509,15 @@ pub(super) fn verify(
         Ok(())
     };
     // The fits choose among hypotheses and decide the slides: a single hypothesis with no
-    // slides to try is counted once, after its finishing (the thin stage's count would be
-    // replaced by it whenever the finishing moves the pose). The same result, one
-    // agreement count fewer for most window and locus registrations.
-    let deferred = hypotheses.len() == 1 && slide.is_none();
+    // slides to try (none asked for, or no weakly held horizontal axis to slide along) is
+    // counted once, after its finishing (the thin stage's count would be replaced by it
+    // whenever the finishing moves the pose). The same result, one agreement count fewer
+    // for most window and locus registrations and for a global one with a single
+    // hypothesis held in every direction (41 ms of the car pair's 0.93 s).
+    let deferred = match hypotheses.as_slice() {
+        [only] => slide.is_none() || weak_horizontal_axis(&only.refinement.degeneracy).is_none(),
+        _ => false,
+    };
     if !deferred {
         for h in &mut hypotheses {
             count(h)?;
