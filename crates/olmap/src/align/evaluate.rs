@@ -22,6 +22,10 @@ use crate::occupancy::{OccupancyList, Pyramid};
 
 /// Scores every candidate, in candidate order.
 pub(super) fn evaluate(problem: &Problem, cands: &[Cand], level: usize) -> Vec<Scored> {
+    if cands.is_empty() {
+        // Nothing to score: no grid is made (nor a part counted against the level).
+        return Vec::new();
+    }
     let l = &problem.lattice;
     let cell = l.cell(level);
     let scan = &problem.scan[level];

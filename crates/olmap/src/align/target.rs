@@ -80,7 +80,7 @@ impl Deref for SearchCells<'_> {
 /// whole: small enough that a part would save nothing worth a second grid.
 const MIN_PART_WORTHY_CELLS: u64 = 1 << 24;
 
-/// A part is made only when it is at most this fraction of the whole box.
+/// A part is made only when it holds at most one cell in this many of the whole box.
 const PART_SHARE: u64 = 2;
 
 /// After this many parts of a level, the next miss makes the whole grid: a target searched
