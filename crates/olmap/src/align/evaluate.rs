@@ -104,6 +104,9 @@ fn reach(
     groups: &[([i32; 3], Vec<[i32; 3]>)],
     level: usize,
 ) -> ([i64; 3], [i64; 3]) {
+    if scan.is_empty() {
+        return ([0; 3], [0; 3]);
+    }
     let cell = l.cell(level);
     let mut smin = Point3::from([f64::INFINITY; 3]);
     let mut smax = Point3::from([f64::NEG_INFINITY; 3]);
@@ -113,9 +116,6 @@ fn reach(
     }
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
-    if scan.is_empty() {
-        return ([0; 3], [0; 3]);
-    }
     for (r, ts) in groups {
         let rot = group_rotation(l, *r, level);
         let mut kmin = [i64::MAX; 3];
