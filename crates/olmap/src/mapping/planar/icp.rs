@@ -37,7 +37,13 @@ pub struct PlanarIcpParams {
     /// apart, so this must reach several of them).
     pub normal_radius: f64,
     /// A target point gets a normal when its neighbours' covariance has
-    /// `λ_min / λ_max` below this (0 = a perfect line).
+    /// `λ_min / λ_max` below this (0 = a perfect line). For `k` points `s` apart along a
+    /// wall scattered by `σ` across it, the ratio is `12 σ² / (s² (k² − 1))`: with the
+    /// default 5 neighbours 5 cm apart, 200 σ². A local map is a stack of scans, each
+    /// thinned on a 5 cm grid (about 1.4 cm of scatter by itself), with a range noise of
+    /// about 1 cm and registered to 1-2 cm: 2-3 cm across its walls. The default 0.2 admits
+    /// up to 3.2 cm; 0.1 (2.2 cm) left most points of a real local map (ACES, Freiburg)
+    /// without a normal, so that a right loop closure matched only 20-40 % of its points.
     pub max_line_ratio: f64,
     /// Converged when a step moves less than this, metres (and this/1 m radians).
     pub step_tolerance: f64,
@@ -52,7 +58,7 @@ impl Default for PlanarIcpParams {
             cauchy_width: 0.05,
             normal_k: 5,
             normal_radius: 0.6,
-            max_line_ratio: 0.1,
+            max_line_ratio: 0.2,
             step_tolerance: 1e-4,
         }
     }
