@@ -11,7 +11,11 @@ use olmap::sim::{
 };
 use olmap::sim::{write_dataset, SimulateReport};
 
-use crate::args::progress;
+use crate::args::{parse_numbers, progress};
+
+/// The longest `--step`, metres: past it consecutive scans of the simulated scanners
+/// hardly overlap.
+const MAX_STEP_M: f64 = 20.0;
 
 /// The world generators.
 #[derive(Clone, Copy, ValueEnum)]
@@ -33,6 +37,10 @@ pub enum WorldArg {
     /// A corridor loop round a solid core (26 x 16 m outside, 3 m wide, a 72 m centre
     /// line); robots drive round it instead of wandering, so long runs close a loop.
     CorridorRing,
+    /// A 200 x 200 x 10 m warehouse: 31 double rack rows (6 m high, 3.6 m aisles) with
+    /// random loads on every shelf; robots drive a serpentine through the aisles (large-scale
+    /// mapping and localisation; repetition everywhere but the loads).
+    Warehouse,
 }
 
 /// The 3D scanners.
@@ -79,9 +87,13 @@ pub struct SimulateArgs {
     /// Number of robots.
     #[arg(long, default_value_t = 4)]
     pub robots: usize,
-    /// Stop-and-scan positions per robot (1-2 m apart).
+    /// Stop-and-scan positions per robot (--step apart).
     #[arg(long, default_value_t = 20)]
     pub scans_per_robot: usize,
+    /// Shortest and longest drive between two stops, metres (`MIN,MAX`, each drive drawn
+    /// uniformly between them; at most 20 m).
+    #[arg(long, default_value = "1,2", value_name = "MIN,MAX")]
+    pub step: String,
     /// Seed: the same seed gives a byte-identical dataset.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -128,6 +140,7 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         WorldArg::DeskHall => WorldKind::DeskHall,
         WorldArg::SymmetricHall => WorldKind::SymmetricHall,
         WorldArg::CorridorRing => WorldKind::CorridorRing,
+        WorldArg::Warehouse => WorldKind::Warehouse,
     };
     let mut scanner = match a.scanner {
         ScannerArg::Mirror => Scanner3d::Mirror(MirrorScanner::enhanced()),
@@ -165,6 +178,14 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<ExitCode> {
         p.noise.sigma = a.range_noise.min(0.01);
         config.scanner2d = Some(p);
     }
+    let [lo, hi] = parse_numbers::<2>(&a.step, "--step")?;
+    if !(lo > 0.0 && lo <= hi && hi <= MAX_STEP_M) {
+        anyhow::bail!(
+            "--step: expected 0 < MIN <= MAX <= {MAX_STEP_M} metres, got '{}'",
+            a.step
+        );
+    }
+    config.motion.step = (lo, hi);
     olmap::sim::check_dataset_output(&a.output)?;
     let start = Instant::now();
     let total = a.robots.saturating_mul(a.scans_per_robot) as u64;

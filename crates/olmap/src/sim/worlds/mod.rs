@@ -1,7 +1,8 @@
 //! Built-in indoor worlds: an empty box room, a furnished lab (thesis §6.5), an office floor
 //! with a stairwell shaft, a featureless corridor, and worlds built to break a verdict
 //! ([`traps`]: identical rooms, rows of identical desks, a symmetric hall, a bare floor, two
-//! walls), and a [`corridor_ring`] robots drive round (a 72 m loop). Every generator is deterministic in
+//! walls), a [`corridor_ring`] robots drive round (a 72 m loop) and a 200 x 200 m
+//! [`warehouse`] of rack rows (the large world). Every generator is deterministic in
 //! its seed (through [`SimRng`]), so a dataset is reproducible from its world name and seed.
 //!
 //! Static objects all carry id 0; structure (floors, walls, ceilings, pillars, stairs) uses
@@ -19,9 +20,11 @@ use super::world::{room_shell, World};
 
 mod ring;
 mod traps;
+mod warehouse;
 
 pub use ring::corridor_ring;
 pub use traps::{desk_hall, floor_only, symmetric_hall, twin_rooms, two_walls};
+pub use warehouse::warehouse;
 
 /// Height band a ground robot occupies: what [`free_spot`] keeps clear of.
 const ROBOT_BAND: (f64, f64) = (0.05, 1.0);
@@ -58,11 +61,13 @@ pub enum WorldKind {
     SymmetricHall,
     /// [`corridor_ring`]: a 72 m corridor loop with its route.
     CorridorRing,
+    /// [`warehouse`]: a 200 x 200 m hall of rack rows with a serpentine route.
+    Warehouse,
 }
 
 impl WorldKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [WorldKind; 8] = [
+    pub const ALL: [WorldKind; 9] = [
         WorldKind::Office,
         WorldKind::Lab,
         WorldKind::Corridor,
@@ -71,10 +76,11 @@ impl WorldKind {
         WorldKind::DeskHall,
         WorldKind::SymmetricHall,
         WorldKind::CorridorRing,
+        WorldKind::Warehouse,
     ];
 
     /// The lower-case name ("office", "lab", "corridor", "box-room", "twin-rooms",
-    /// "desk-hall", "symmetric-hall", "corridor-ring").
+    /// "desk-hall", "symmetric-hall", "corridor-ring", "warehouse").
     pub fn name(self) -> &'static str {
         match self {
             WorldKind::Office => "office",
@@ -85,6 +91,7 @@ impl WorldKind {
             WorldKind::DeskHall => "desk-hall",
             WorldKind::SymmetricHall => "symmetric-hall",
             WorldKind::CorridorRing => "corridor-ring",
+            WorldKind::Warehouse => "warehouse",
         }
     }
 
@@ -99,6 +106,7 @@ impl WorldKind {
             WorldKind::DeskHall => desk_hall(seed),
             WorldKind::SymmetricHall => symmetric_hall(seed),
             WorldKind::CorridorRing => corridor_ring(seed),
+            WorldKind::Warehouse => warehouse(seed),
         }
     }
 }
