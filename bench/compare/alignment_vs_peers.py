@@ -35,7 +35,6 @@ Needs: an olmap release build and the pinned peers
 (`pip install -r bench/compare/requirements.txt`; Open3D also needs libusb-1.0 and libgomp).
 """
 
-import argparse
 import json
 import math
 import os
@@ -46,7 +45,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import loadavg, run  # noqa: E402
+from common import loadavg, parser, run  # noqa: E402
 import time
 
 ICP_VOXEL = 0.05
@@ -241,11 +240,7 @@ def main():
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
         worker(sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
         return
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    here = os.path.dirname(os.path.abspath(__file__))
-    root = os.path.dirname(os.path.dirname(here))
-    ap.add_argument("--data", default=os.environ.get("OLMAP_DATA", os.path.join(root, "..", "shared", "data")))
-    ap.add_argument("--olmap", default=os.path.join(root, "target", "release", "olmap"))
+    ap = parser(__doc__)
     ap.add_argument("--repeat", type=int, default=3, help="runs per tool and pair; medians reported (default 3)")
     ap.add_argument("--core", type=int, default=0, help="the CPU core every run is pinned to (default 0)")
     ap.add_argument("--methods", default=",".join(METHODS),

@@ -15,7 +15,6 @@ Usage: bench/compare/free_space_vs_octomap.py [--data DIR] [--olmap BIN]
 Needs: an olmap release build (`cargo build --release`), `graph2tree` on PATH.
 """
 
-import argparse
 import json
 import os
 import re
@@ -26,7 +25,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import loadavg, run  # noqa: E402
+from common import loadavg, parser, run  # noqa: E402
 
 
 def cases(data):
@@ -40,11 +39,7 @@ def cases(data):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    here = os.path.dirname(os.path.abspath(__file__))
-    root = os.path.dirname(os.path.dirname(here))
-    ap.add_argument("--data", default=os.environ.get("OLMAP_DATA", os.path.join(root, "..", "shared", "data")))
-    ap.add_argument("--olmap", default=os.path.join(root, "target", "release", "olmap"))
+    ap = parser(__doc__)
     ap.add_argument("--resolution", type=float, default=0.05, help="voxel edge, metres (default 0.05)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per tool; medians are reported (default 3)")
     ap.add_argument("--json", action="store_true", help="print JSON rows instead of a table")

@@ -17,7 +17,6 @@ runs, each tool timing only its optimisation (file reading excluded).
 Usage: bench/compare/pose_graphs_vs_gtsam.py [--data DIR] [--olmap BIN] [--repeat N] [--json]
 """
 
-import argparse
 import json
 import os
 import shutil
@@ -27,7 +26,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import loadavg, run  # noqa: E402
+from common import loadavg, parser, run  # noqa: E402
 
 GRAPHS = ["parking-garage", "sphere2500", "M3500"]
 
@@ -70,11 +69,7 @@ print(json.dumps(out))
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    here = os.path.dirname(os.path.abspath(__file__))
-    root = os.path.dirname(os.path.dirname(here))
-    ap.add_argument("--data", default=os.environ.get("OLMAP_DATA", os.path.join(root, "..", "shared", "data")))
-    ap.add_argument("--olmap", default=os.path.join(root, "target", "release", "olmap"))
+    ap = parser(__doc__)
     ap.add_argument("--repeat", type=int, default=3, help="runs per tool; medians are reported (default 3)")
     ap.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     a = ap.parse_args()

@@ -753,6 +753,59 @@ fn simulate_writes_a_dataset_and_refuses_to_overwrite() {
     assert_eq!(std::fs::read(out.join("manifest.json")).unwrap(), before);
 }
 
+/// `--step` sets the drive between stops (here in the warehouse, along an aisle of its
+/// serpentine route); a step that is not 0 < MIN <= MAX <= 20 m is refused before anything
+/// is written.
+#[test]
+fn simulate_drives_the_given_step_and_refuses_a_bad_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("wh");
+    let v = json(&olmap(&[
+        "simulate",
+        "--json",
+        "--world",
+        "warehouse",
+        "--robots",
+        "1",
+        "--scans-per-robot",
+        "4",
+        "--step",
+        "3,3",
+        "--scanner",
+        "lidar",
+        "-o",
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(v["world"], "warehouse");
+    let truth = olmap::io::read_poses(out.join("robot0").join("truth.txt")).unwrap();
+    for k in 1..4 {
+        let a = truth
+            .get(&format!("scan{:03}", k - 1))
+            .unwrap()
+            .translation();
+        let b = truth.get(&format!("scan{k:03}")).unwrap().translation();
+        // 3 m along the route, moved up to 0.2 m sideways at each stop (the route's jitter).
+        let d = (b - a).norm();
+        assert!((d - 3.0).abs() <= 0.45, "stop {k}: {d:.3} m from the last");
+    }
+    for bad in ["0,1", "3,2", "1,25", "1"] {
+        let target = dir.path().join(format!("bad{}", bad.replace(',', "_")));
+        let o = olmap(&[
+            "simulate",
+            "--world",
+            "warehouse",
+            "--step",
+            bad,
+            "-o",
+            target.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success(), "--step {bad} accepted");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("--step"), "{err}");
+        assert!(!target.exists(), "--step {bad} wrote {}", target.display());
+    }
+}
+
 #[test]
 fn mutual_localisation_from_numbers() {
     // B 4 m ahead of A and facing it; beacons 0.07 m ahead of each scanner.

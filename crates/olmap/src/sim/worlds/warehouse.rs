@@ -140,7 +140,7 @@ fn route(rows: usize) -> Vec<(f64, f64)> {
     let mut corners = Vec::with_capacity(2 * rows + 3);
     for k in 0..=rows {
         let y = aisle_y(k);
-        if k % 2 == 0 {
+        if k.is_multiple_of(2) {
             corners.push((west, y));
             corners.push((east, y));
         } else {
@@ -149,7 +149,7 @@ fn route(rows: usize) -> Vec<(f64, f64)> {
         }
     }
     // Back south along the west side (from the east end if the last pass went east).
-    if rows % 2 == 0 {
+    if rows.is_multiple_of(2) {
         corners.push((east, WAREHOUSE_SIZE.1 - 4.0));
         corners.push((2.5, WAREHOUSE_SIZE.1 - 4.0));
     }
