@@ -153,7 +153,7 @@ fn choice<T: Copy>(what: &str, value: &str, options: &[(&str, T)]) -> PyResult<T
 ///     world: ``"office"``, ``"lab"`` (default: a furnished 20 x 20 x 3 m room),
 ///         ``"corridor"``, ``"box-room"``, ``"twin-rooms"``, ``"desk-hall"``,
 ///         ``"symmetric-hall"``, ``"corridor-ring"`` (a 72 m corridor loop the robots drive
-///         round).
+///         round), ``"warehouse"`` (200 x 200 m of rack rows, a serpentine route).
 ///     robots: number of robots (default 4).
 ///     scans_per_robot: stops (3D scans) per robot (default 20).
 ///     seed: seed of everything random (default 1).
