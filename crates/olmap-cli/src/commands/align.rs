@@ -216,6 +216,7 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
             Origin::Search => "the search",
             Origin::UprightLook => "the upright look (floors and ceilings thinned)",
             Origin::Slide => "a slide along the weakly held direction",
+            Origin::Screened => "a near-best pose of the search screened among look-alikes",
         };
         let n = v.hypotheses.len();
         println!(

@@ -9,10 +9,10 @@ use super::lattice::{Alignment, Candidate};
 use super::search::global_search;
 use super::target::SearchTarget;
 use super::verdict::{
-    agreement_doubts, refinement_doubts, search_doubts, uniqueness_doubts, upright_look_doubts,
-    window_doubts, TrustThresholds,
+    agreement_doubts, look_alike_doubts, refinement_doubts, search_doubts, uniqueness_doubts,
+    upright_look_doubts, window_doubts, TrustThresholds,
 };
-use super::verify::{starts, upright_starts, verify, RefineAgainst, Verification};
+use super::verify::{starts, upright_starts, verify, GlobalChecks, RefineAgainst, Verification};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -146,8 +146,10 @@ fn finish(
                     }
                     _ => None,
                 },
-                matches!(params.search.region, super::Region::Global)
-                    .then_some(params.trust.min_agreement),
+                matches!(params.search.region, super::Region::Global).then_some(GlobalChecks {
+                    min_agreement: params.trust.min_agreement,
+                    min_refutation: params.trust.min_refutation,
+                }),
             )?)
         }
         _ => None,
@@ -157,6 +159,7 @@ fn finish(
             let w = v.winner();
             let global = matches!(params.search.region, super::Region::Global);
             doubts.extend(uniqueness_doubts(v, &params.trust, global));
+            doubts.extend(look_alike_doubts(v, global));
             doubts.extend(refinement_doubts(
                 &w.start,
                 &w.refinement,

@@ -83,6 +83,11 @@ pub struct UniquenessReport {
     /// (the verdict doubts the match at 4 or more).
     #[serde(default)]
     pub cleaner_rival_sigma: Option<f64>,
+    /// The search's distinct near-best poses that no refined hypothesis covers
+    /// ([`super::verify::unverified_look_alikes`]): listed ones and ones beyond the
+    /// search's list (the verdict doubts the match when there is any).
+    #[serde(default)]
+    pub unverified_look_alikes: usize,
 }
 
 /// One refined hypothesis ([`super::verify::Hypothesis`]).
@@ -275,6 +280,7 @@ impl AlignmentReport {
                     .map_or(0.0, |v| v.runner_up_ratio()),
                 cleaner_rival: cleaner.map(|c| c.0),
                 cleaner_rival_sigma: cleaner.map(|c| c.1),
+                unverified_look_alikes: r.verification.as_ref().map_or(0, |v| v.unverified.total()),
             },
             agreement: r.consistency.as_ref().map(|c| AgreementJson {
                 source: c.source.agreement(),

@@ -116,6 +116,20 @@ impl SearchTarget {
         })
     }
 
+    /// The same target from its level `k` up, at `2^k` times the resolution (its
+    /// occupied cells and free space as they are at those levels); `None` when `k` is not
+    /// a level.
+    pub(crate) fn coarsened(&self, k: usize) -> Option<SearchTarget> {
+        let pyramid = self.pyramid.above(k)?;
+        let levels = pyramid.levels();
+        Some(SearchTarget {
+            pyramid,
+            free: self.free[k..].to_vec(),
+            occupied: (0..levels).map(|_| OnceLock::new()).collect(),
+            grids: empty_grids(levels),
+        })
+    }
+
     /// A target from one scan in its own frame: endpoints voxelised at `resolution`, and
     /// free space ray traced from the scan's origin at every level.
     pub fn from_cloud(cloud: &PointCloud, resolution: f64, levels: usize) -> Result<Self> {

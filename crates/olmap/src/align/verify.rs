@@ -117,15 +117,20 @@ pub enum Origin {
     UprightLook,
     /// A slide along the best hypothesis' weakly held direction ([`weak_axis`]).
     Slide,
+    /// One of the search's other near-best poses, beyond every refined hypothesis' reach,
+    /// whose agreement counted where the search put it (unrefined) could beat the winner
+    /// (see [`unverified_look_alikes`]).
+    Screened,
 }
 
 impl Origin {
-    /// Its name in reports: `search`, `upright-look` or `slide`.
+    /// Its name in reports: `search`, `upright-look`, `slide` or `screened`.
     pub fn name(self) -> &'static str {
         match self {
             Origin::Search => "search",
             Origin::UprightLook => "upright-look",
             Origin::Slide => "slide",
+            Origin::Screened => "screened",
         }
     }
 }
@@ -185,6 +190,85 @@ pub struct Verification {
     /// Indices of every distinct rival the runner-up was chosen among: outside the
     /// winner's basin and, in a window search, about as near the prior as the winner.
     pub rivals: Vec<usize>,
+    /// The search's distinct near-best poses that no hypothesis covers
+    /// ([`unverified_look_alikes`]).
+    pub unverified: Unverified,
+}
+
+/// The search's distinct near-best poses (its cluster heads, scoring at least its
+/// `keep_ratio` of the best: [`Alignment::ambiguity`]) that no refinement started or
+/// ended near ([`COVER_ROTATION`], and the refinement's reach in metres), and that, in a
+/// window search, lie about as near the prior as the winner.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Unverified {
+    /// Every head ([`Alignment::ambiguity`]).
+    pub heads: usize,
+    /// Of the heads the search lists ([`Alignment::candidates`], the best 32).
+    pub listed: usize,
+    /// Heads beyond the list ([`Alignment::ambiguity`] minus the listed heads): the search
+    /// counted them but kept no pose, so none is known to be covered.
+    pub unlisted: usize,
+}
+
+impl Unverified {
+    /// Every uncovered head.
+    pub fn total(&self) -> usize {
+        self.listed + self.unlisted
+    }
+}
+
+/// A screened head's agreement is counted at the target's pyramid level this far above
+/// the finest (4x coarser: 0.2 m for a 0.05 m map), the best hypothesis' the same way.
+/// At the finest resolution a count around a scan's whole footprint costs seconds in a
+/// large map (a lidar scan in the warehouse reaches 80 m along its aisle and down the
+/// cross-aisles: 1-6 M map points per count); counted only near the sensor instead (15 m),
+/// the look-alike whose refinement refused the warehouse's wrong answer no longer stood
+/// out: its evidence lies far along the aisles.
+pub const SCREEN_LEVEL: usize = 2;
+
+/// A search head counts as examined when a refinement started or ended within the
+/// refinement's reach and this angle (radians; 10°) of it: a refinement from the head
+/// would most likely descend into the same minimum.
+pub const COVER_ROTATION: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
+/// The search's distinct near-best poses that the verification did not examine
+/// ([`Unverified`]): farther than `reach` metres (the refinement's first correspondence
+/// gate) or [`COVER_ROTATION`] from every `examined` pose (each start refined, each
+/// hypothesis' end).
+///
+/// The verification refines the search's best and its best few rivals by score. In a place
+/// that repeats many times over (the aisles of a warehouse, seen through the racks) dozens
+/// of look-alikes score within a few per cent of one another and the truth can rank
+/// anywhere among them: the verified rivals are then refuted and the winner looks unique
+/// although the look-alike that would have beaten it was never refined (issue 22: a
+/// warehouse scan localised globally 11.55 m off, trusted, with 29 near-best clusters and
+/// the truth, fitting cleaner, not among the 6 refined).
+///
+/// So a global search's verification *screens* each listed head it does not cover: the
+/// two scans' agreement is counted at the head's unrefined pose (one count, no ICP), and
+/// the head is refined beside the others ([`Origin::Screened`]) when that count already
+/// fits as well as the best hypothesis, or is supported at least [`CLEANER_MIN_SUPPORT`]
+/// as well and contradicted by the verdict's `min_refutation` standard deviations less
+/// (the cleaner-rival test, which then decides). The heads left here are the screened
+/// ones that could not beat the winner (global searches), or, in a window or locus search,
+/// the unscreened ones about as near the prior as the winner; `unlisted` are heads the
+/// search did not keep, which the verdict doubts a global match for.
+pub fn unverified_look_alikes(
+    search: &Alignment,
+    examined: &[Pose],
+    won: &Pose,
+    reach: f64,
+    prior: Option<(&Pose, f64)>,
+) -> Unverified {
+    let listed = uncovered(search, examined, reach)
+        .iter()
+        .filter(|c| plausible_near(prior, &c.pose, won))
+        .count();
+    Unverified {
+        heads: search.ambiguity,
+        listed,
+        unlisted: search.ambiguity.saturating_sub(search.candidates.len()),
+    }
 }
 
 impl Verification {
@@ -361,16 +445,27 @@ pub(super) struct RefineAgainst<'a> {
     pub(super) prepared: Option<&'a IcpTarget>,
 }
 
+/// The verdict's thresholds that a global search's verification uses itself.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct GlobalChecks {
+    /// The agreement a best hypothesis needs before it is slid along a weak axis.
+    pub(super) min_agreement: f64,
+    /// The refutation (standard deviations) by which a screened look-alike's fewer
+    /// contradictions earn it a refinement (see [`unverified_look_alikes`]).
+    pub(super) min_refutation: f64,
+}
+
 /// Refines and scores the search's best and its strong rivals against `target` (the
 /// prepared target, for the agreement) and `against` (the target's points: ICP runs on
 /// them, prepared once for all hypotheses; the agreement on them cropped to `reach` metres
 /// around each hypothesis' footprint). With `prior` (a window search's prior pose and a
 /// margin in metres) the distinct runner-up is chosen among the rivals no farther from the
-/// prior than the winner plus the margin. `slide` is `Some(min_agreement)` for a search
-/// over every pose ([`super::Region::Global`]): its best hypothesis is then slid along a
-/// weakly held direction ([`weak_axis`]) when it agrees with the scans at least that well
-/// (the verdict's agreement threshold). `extra` are further starts refined after the
-/// search's own (the upright look: [`upright_starts`]).
+/// prior than the winner plus the margin. `global` is set for a search over every pose
+/// ([`super::Region::Global`]): its best hypothesis is then slid along a weakly held
+/// direction ([`weak_axis`]) when it agrees with the scans at least as well as
+/// [`GlobalChecks::min_agreement`], and the search's other near-best poses are screened
+/// (see [`unverified_look_alikes`]). `extra` are further starts refined after the search's own
+/// (the upright look: [`upright_starts`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn verify(
     source: &PointCloud,
@@ -381,8 +476,9 @@ pub(super) fn verify(
     icp: &IcpParams,
     reach: f64,
     prior: Option<(&Pose, f64)>,
-    slide: Option<f64>,
+    global: Option<GlobalChecks>,
 ) -> Result<Verification> {
+    let slide = global.map(|g| g.min_agreement);
     let res = target.resolution();
     let points = against.points;
     // What the source saw, for the agreement counts (built beside the thin stage).
@@ -405,6 +501,9 @@ pub(super) fn verify(
         .map(|c| (*c, Origin::Search))
         .chain(extra.iter().map(|c| (*c, Origin::UprightLook)))
         .collect();
+    // Every start refined, kept or not (a rival that ran into an earlier hypothesis is
+    // dropped, but the search's head it started from was examined).
+    let mut tried: Vec<Pose> = starts.iter().map(|(c, _)| c.pose).collect();
     let own;
     let external = against.prepared.filter(|p| p.prepared_for(icp));
     // One preparation for every hypothesis (the points near any of them), unless the
@@ -492,19 +591,16 @@ pub(super) fn verify(
         (hypotheses, memories)
     });
     let seen = seen?;
+    let counted = |at: &Pose, start: &Pose| {
+        consistency_seen(source, seen.as_ref(), target, Some(&near(start)), at)
+    };
     // Each hypothesis' nearest target points, from its thin stage to its finishing, and
     // the prepared target it is refined against.
     let (mut hypotheses, mut memories): (Vec<Hypothesis>, Vec<NearestMemory>) = first;
     let mut targets: Vec<&IcpTarget> = vec![prepared; hypotheses.len()];
     // The agreement of one hypothesis at its current pose, and its fit.
     let count = |h: &mut Hypothesis| -> Result<()> {
-        h.consistency = consistency_seen(
-            source,
-            seen.as_ref(),
-            target,
-            Some(&near(&h.start.pose)),
-            &h.pose(),
-        )?;
+        h.consistency = counted(&h.pose(), &h.start.pose)?;
         h.fit = fit(&h.consistency);
         Ok(())
     };
@@ -514,7 +610,7 @@ pub(super) fn verify(
     // whenever the finishing moves the pose). The same result, one agreement count fewer
     // for most window and locus registrations and for a global one with a single
     // hypothesis held in every direction (41 ms of the car pair's 0.93 s).
-    let deferred = match hypotheses.as_slice() {
+    let mut deferred = match hypotheses.as_slice() {
         [only] => slide.is_none() || weak_horizontal_axis(&only.refinement.degeneracy).is_none(),
         _ => false,
     };
@@ -545,6 +641,7 @@ pub(super) fn verify(
         }
         _ => Vec::new(),
     };
+    let screen_target;
     if !slides.is_empty() {
         // The points prepared for the search's starts may not reach this far along.
         let boxes = slides
@@ -565,6 +662,7 @@ pub(super) fn verify(
             wide = IcpTarget::new(&b, icp)?;
             &wide
         };
+        tried.extend(slides.iter().map(|c| c.pose));
         for start in slides {
             if let Some((mut h, memory)) =
                 try_start(start, Origin::Slide, slide_target, &hypotheses)
@@ -573,6 +671,62 @@ pub(super) fn verify(
                 hypotheses.push(h);
                 memories.push(memory);
                 targets.push(slide_target);
+            }
+        }
+    }
+    // A global search's other near-best poses that no hypothesis reached, screened where
+    // the search put them (against the best hypothesis' count, made now if it was put off);
+    // the promising ones refined as the others were.
+    // (Not when the search counted more heads than it lists: the verdict doubts that
+    // match whatever the screening finds.)
+    let mut screened = Vec::new();
+    let all_listed = search.ambiguity <= search.candidates.len();
+    if let Some(g) = global.filter(|_| all_listed) {
+        let heads = uncovered(search, &examined(&tried, &hypotheses), reach);
+        if !heads.is_empty() && deferred {
+            for h in &mut hypotheses {
+                count(h)?;
+            }
+            deferred = false;
+        }
+        if let Some(best) = best_fit(&hypotheses).filter(|_| !heads.is_empty()) {
+            // Each pose counted at a coarser resolution (the best hypothesis too, so that
+            // like is compared with like), against the target's points around it.
+            let k = SCREEN_LEVEL.min(target.pyramid().levels() - 1);
+            let coarse = target.coarsened(k).expect("a level of the target");
+            let coarse_seen = match &seen {
+                Some(_) => Some(source_view(source, &coarse)?),
+                None => None,
+            };
+            let quick = |at: &Pose| {
+                consistency_seen(source, coarse_seen.as_ref(), &coarse, Some(&near(at)), at)
+            };
+            let reference = quick(&hypotheses[best].pose())?;
+            for c in heads {
+                if could_beat(&reference, &quick(&c.pose)?, g.min_refutation) {
+                    screened.push(c);
+                }
+            }
+        }
+    }
+    let screened_starts: Vec<Pose> = screened.iter().map(|c| c.pose).collect();
+    if !screened.is_empty() {
+        let boxes = screened
+            .iter()
+            .filter_map(|s| near_box(source, &s.pose, reach))
+            .reduce(|a, b| a.union(&b));
+        let b = boxes
+            .as_ref()
+            .map_or_else(|| points.clone(), |b| points.crop_box(b));
+        screen_target = IcpTarget::new(&b, icp)?;
+        for start in screened {
+            if let Some((mut h, memory)) =
+                try_start(start, Origin::Screened, &screen_target, &hypotheses)
+            {
+                count(&mut h)?;
+                hypotheses.push(h);
+                memories.push(memory);
+                targets.push(&screen_target);
             }
         }
     }
@@ -617,12 +771,61 @@ pub(super) fn verify(
             .total_cmp(&refutation(w, &hypotheses[b]))
             .then(a.cmp(&b))
     });
+    tried.extend(screened_starts);
+    let examined = examined(&tried, &hypotheses);
+    let unverified = unverified_look_alikes(search, &examined, &won, reach, prior);
     Ok(Verification {
         hypotheses,
         chosen,
         runner_up,
         rivals,
+        unverified,
     })
+}
+
+/// The search's near-best poses ([`Alignment::candidates`]) farther than `reach` metres or
+/// [`COVER_ROTATION`] from every `examined` pose.
+fn uncovered(search: &Alignment, examined: &[Pose], reach: f64) -> Vec<Candidate> {
+    search
+        .candidates
+        .iter()
+        .filter(|c| !examined.iter().any(|p| near_pose(p, &c.pose, reach)))
+        .copied()
+        .collect()
+}
+
+/// The poses a verification examined: every start it refined (`tried`) and where each
+/// kept hypothesis ended.
+fn examined(tried: &[Pose], hypotheses: &[Hypothesis]) -> Vec<Pose> {
+    tried
+        .iter()
+        .copied()
+        .chain(hypotheses.iter().map(Hypothesis::pose))
+        .collect()
+}
+
+/// Whether two poses lie within `reach` metres and [`COVER_ROTATION`] of each other.
+fn near_pose(a: &Pose, b: &Pose, reach: f64) -> bool {
+    (a.translation() - b.translation()).norm() <= reach
+        && a.rotation().angle_to(&b.rotation()) <= COVER_ROTATION
+}
+
+/// Whether a look-alike counted unrefined (`quick`) could beat the best hypothesis,
+/// counted the same way (`best`): it fits at least as well already, or the scans support
+/// it at least [`CLEANER_MIN_SUPPORT`] as well and contradict it `min_refutation` standard
+/// deviations less (the verdict's cleaner-rival test, [`Verification::cleaner_rival`]).
+/// Refinement only raises a pose's fit, so either says the look-alike deserves one.
+fn could_beat(best: &Consistency, quick: &Consistency, min_refutation: f64) -> bool {
+    let both = |c: &Consistency| {
+        let t = c.target.unwrap_or_default();
+        (
+            (c.source.supported + t.supported) as f64,
+            (c.source.contradicted + t.contradicted) as f64,
+        )
+    };
+    let ((sq, cq), (sw, cw)) = (both(quick), both(best));
+    fit(quick) >= fit(best)
+        || (sq >= CLEANER_MIN_SUPPORT * sw && (cw - cq) / (cw + cq + 1.0).sqrt() >= min_refutation)
 }
 
 /// The hypothesis with the best fit (the earlier on a tie), `None` without any.
@@ -651,4 +854,120 @@ fn near_box(source: &PointCloud, pose: &Pose, reach: f64) -> Option<Aabb> {
     let b = source.transformed(pose).bounding_box()?;
     let m = nalgebra::Vector3::repeat(reach);
     Some(Aabb::new(b.min - m, b.max + m))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::align::consistency::SideAgreement;
+    use crate::align::icp::IcpResult;
+
+    fn pose(x: f64, yaw_deg: f64) -> Pose {
+        Pose::from_xyz_ypr(x, 0.0, 0.0, yaw_deg.to_radians(), 0.0, 0.0)
+    }
+
+    fn candidate(x: f64, yaw_deg: f64) -> Candidate {
+        Candidate {
+            pose: pose(x, yaw_deg),
+            overlap: 100,
+            score: 100,
+        }
+    }
+
+    /// A hypothesis refined from `start` to `end` whose two sides together count
+    /// `supported` and `contradicted` voxels (all on the scan's side).
+    fn hypothesis(start: Candidate, end: Pose, supported: u64, contradicted: u64) -> Hypothesis {
+        let consistency = Consistency {
+            source: SideAgreement {
+                voxels: supported + contradicted,
+                supported,
+                contradicted,
+                ..Default::default()
+            },
+            target: None,
+            resolution: 0.05,
+        };
+        Hypothesis {
+            start,
+            origin: Origin::Search,
+            refinement: IcpResult::at(end, true),
+            consistency,
+            fit: fit(&consistency),
+        }
+    }
+
+    fn search(candidates: Vec<Candidate>, ambiguity: usize) -> Alignment {
+        Alignment {
+            pose: candidates[0].pose,
+            overlap: 100,
+            score: 100,
+            scan_voxels: 100,
+            overlap_fraction: 1.0,
+            significance: 50.0,
+            ambiguity,
+            candidates,
+            runner_up: None,
+            spread: [0.0; 4],
+            conflicts: 0,
+            levels: Vec::new(),
+            guard_acted: false,
+            evaluated: 0,
+            seconds: 0.0,
+            exact: false,
+        }
+    }
+
+    /// A head within the refinement's reach of where a refinement started or ended (and
+    /// turned by less than `COVER_ROTATION`) was examined; one farther, or turned more, was
+    /// not; heads the search counted but did not list are unlisted, whatever the list.
+    #[test]
+    fn heads_beyond_every_refinement_s_reach_are_unexamined() {
+        let heads = vec![
+            candidate(0.0, 0.0),
+            candidate(0.3, 0.0),  // within 0.4 m of the first hypothesis' start
+            candidate(2.1, 0.0),  // within 0.4 m of the second hypothesis' end
+            candidate(5.0, 0.0),  // beyond both
+            candidate(0.0, 15.0), // where the first started, turned 15°
+        ];
+        let hs = vec![
+            hypothesis(heads[0], pose(0.05, 0.0), 1000, 10),
+            hypothesis(candidate(1.0, 0.0), pose(1.8, 0.0), 900, 10),
+        ];
+        let s = search(heads, 40);
+        let won = hs[0].pose();
+        let tried: Vec<Pose> = hs.iter().map(|h| h.start.pose).collect();
+        let seen = examined(&tried, &hs);
+        let left: Vec<f64> = uncovered(&s, &seen, 0.4)
+            .iter()
+            .map(|c| c.pose.translation().x)
+            .collect();
+        assert_eq!(left, vec![5.0, 0.0]);
+        let u = unverified_look_alikes(&s, &seen, &won, 0.4, None);
+        assert_eq!((u.heads, u.listed, u.unlisted, u.total()), (40, 2, 35, 37));
+        // A window search counts only heads about as near its prior as the winner.
+        let prior = pose(0.0, 0.0);
+        let u = unverified_look_alikes(&s, &seen, &won, 0.4, Some((&prior, 0.5)));
+        assert_eq!(u.listed, 1, "the head 5 m from the prior is no rival there");
+    }
+
+    /// A screened look-alike earns a refinement when, unrefined, it already fits as well as
+    /// the best hypothesis, or is supported at least half as well and contradicted by the
+    /// refutation's standard deviations less; not otherwise.
+    #[test]
+    fn a_look_alike_is_refined_only_when_it_could_beat_the_winner() {
+        let best = hypothesis(candidate(0.0, 0.0), pose(0.0, 0.0), 2000, 100).consistency; // fit 1200
+        let quick = |supported: u64, contradicted: u64| {
+            hypothesis(candidate(9.0, 0.0), pose(9.0, 0.0), supported, contradicted).consistency
+        };
+        // Cleaner: 1100 >= 1000 supported, (100 - 20) / sqrt(121) = 7.3 >= 4 sigma (fit 940).
+        assert!(could_beat(&best, &quick(1100, 20), 4.0));
+        // The same look-alike against a stricter refutation: no.
+        assert!(!could_beat(&best, &quick(1100, 20), 8.0));
+        // As clean but too little supported (900 < 1000), and fitting worse (660 < 1200).
+        assert!(!could_beat(&best, &quick(900, 30), 4.0));
+        // Fits better already (1300 >= 1200).
+        assert!(could_beat(&best, &quick(1300, 0), 4.0));
+        // Supported as well, about as contradicted (z = 0.7), fitting worse (1080): no.
+        assert!(!could_beat(&best, &quick(1800, 90), 4.0));
+    }
 }

@@ -85,6 +85,13 @@ pub struct TrustRow {
     pub runner_up_ratio: f64,
     /// The two scans' agreement at the final pose (when refined).
     pub agreement: Option<f64>,
+    /// The search's distinct near-best poses ([`crate::align::Alignment::ambiguity`]).
+    #[serde(default)]
+    pub ambiguity: usize,
+    /// Of those, the ones no refined hypothesis covers
+    /// ([`crate::align::verify::unverified_look_alikes`]).
+    #[serde(default)]
+    pub unverified: usize,
     /// The verdict's doubts.
     pub doubts: Vec<String>,
     /// Seconds of the registration.
@@ -171,6 +178,8 @@ pub fn run_trust(
             significance: r.search.significance,
             runner_up_ratio: r.verification.as_ref().map_or(0.0, |v| v.runner_up_ratio()),
             agreement: r.consistency.map(|c| c.agreement()),
+            ambiguity: r.search.ambiguity,
+            unverified: r.verification.as_ref().map_or(0, |v| v.unverified.total()),
             doubts: r.doubts.clone(),
             seconds: r.seconds,
         });

@@ -91,6 +91,14 @@ impl Pyramid {
         Ok(Pyramid { levels: v })
     }
 
+    /// The pyramid from level `k` up (level `k` becomes the base), copied; `None` when
+    /// `k` is not a level.
+    pub(crate) fn above(&self, k: usize) -> Option<Pyramid> {
+        (k < self.levels.len()).then(|| Pyramid {
+            levels: self.levels[k..].to_vec(),
+        })
+    }
+
     /// Number of levels.
     pub fn levels(&self) -> usize {
         self.levels.len()

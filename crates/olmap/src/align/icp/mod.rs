@@ -156,6 +156,30 @@ pub struct IcpResult {
     pub(crate) ended: StageEnd,
 }
 
+#[cfg(test)]
+impl IcpResult {
+    /// A refinement that stayed at `pose`, converged or not (for tests of what weighs
+    /// refined hypotheses).
+    pub(crate) fn at(pose: Pose, converged: bool) -> IcpResult {
+        IcpResult {
+            pose,
+            converged,
+            iterations: 0,
+            inlier_rms: 0.0,
+            inlier_fraction: 1.0,
+            correspondences: 0,
+            degeneracy: Degeneracy::unconstrained(),
+            hessian: Matrix6::zeros(),
+            inliers: 0,
+            seconds: 0.0,
+            ended: StageEnd {
+                d: 0.0,
+                stopped: false,
+            },
+        }
+    }
+}
+
 /// Where a run of the schedule ended ([`IcpResult::ended`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct StageEnd {

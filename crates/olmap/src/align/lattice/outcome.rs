@@ -122,8 +122,12 @@ pub(crate) struct Scored {
     pub(crate) cand: Cand,
 }
 
-/// The most candidates (cluster heads) an [`Alignment`] lists.
-pub(crate) const MAX_CANDIDATES: usize = 10;
+/// The most candidates (cluster heads) an [`Alignment`] lists. A global verification
+/// screens every listed head beyond its refined hypotheses' reach
+/// ([`crate::align::verify::unverified_look_alikes`]) and doubts a match with more heads
+/// than this: the trust suite's right answers had up to 29 (rows of desks, symmetric
+/// halls), a warehouse scan among look-alike aisles 29.
+pub(crate) const MAX_CANDIDATES: usize = 32;
 
 /// The lowest score that survives: `keep_ratio` of the best for a positive best, the same
 /// margin below it otherwise.
