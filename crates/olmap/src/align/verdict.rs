@@ -271,7 +271,9 @@ pub(super) fn upright_look_doubts(w: &Hypothesis, t: &TrustThresholds) -> Vec<St
         return Vec::new();
     }
     let found = match w.origin {
-        Origin::UprightLook => "only the search on upright structure (floors thinned) found this pose",
+        Origin::UprightLook => {
+            "only the search on upright structure (floors thinned) found this pose"
+        }
         Origin::Screened => {
             "this pose was one of many near-best look-alikes of the search, refined only after \
              a screening"

@@ -256,20 +256,19 @@ fn scans_among_the_warehouse_s_look_alike_aisles_are_not_trusted_wrong() {
             map.add_points(scan, pose, 1);
         }
     }
-    for q in [5] {
-        let r = align::localize(&robot.scans[q], &map, &RegisterParams::default()).unwrap();
-        let (dt, dr) = pose_error(&r.pose, &robot.truth[q]);
-        eprintln!(
-            "scan {q}: {dt:.2} m / {:.2} deg off, trusted {}, ambiguity {}, {:?}",
-            dr.to_degrees(),
-            r.trusted,
-            r.search.ambiguity,
-            r.doubts
-        );
-        assert!(
-            !r.trusted || (dt <= RIGHT_TRANSLATION && dr <= RIGHT_ROTATION),
-            "scan {q} trusted {dt:.2} m / {:.1} deg off",
-            dr.to_degrees()
-        );
-    }
+    let q = 5;
+    let r = align::localize(&robot.scans[q], &map, &RegisterParams::default()).unwrap();
+    let (dt, dr) = pose_error(&r.pose, &robot.truth[q]);
+    eprintln!(
+        "scan {q}: {dt:.2} m / {:.2} deg off, trusted {}, ambiguity {}, {:?}",
+        dr.to_degrees(),
+        r.trusted,
+        r.search.ambiguity,
+        r.doubts
+    );
+    assert!(
+        !r.trusted || (dt <= RIGHT_TRANSLATION && dr <= RIGHT_ROTATION),
+        "scan {q} trusted {dt:.2} m / {:.1} deg off",
+        dr.to_degrees()
+    );
 }
