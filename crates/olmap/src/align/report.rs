@@ -84,8 +84,8 @@ pub struct UniquenessReport {
     #[serde(default)]
     pub cleaner_rival_sigma: Option<f64>,
     /// The search's distinct near-best poses that no refined hypothesis covers
-    /// ([`super::verify::unverified_look_alikes`]): listed ones and ones beyond the
-    /// search's list (the verdict doubts the match when there is any).
+    /// ([`super::verify::unverified_look_alikes`]): listed ones (reported only) and ones
+    /// beyond the search's list (a global match with any of these is doubted).
     #[serde(default)]
     pub unverified_look_alikes: usize,
 }
@@ -108,7 +108,8 @@ pub struct HypothesisJson {
     #[serde(default)]
     pub contradicted: u64,
     /// Where its start came from: `search`, `upright-look` (the search on upright
-    /// structure, [`super::verify::Origin::UprightLook`]) or `slide` ([`super::verify::weak_axis`]).
+    /// structure, [`super::verify::Origin::UprightLook`]), `slide`
+    /// ([`super::verify::weak_axis`]) or `screened` ([`super::verify::Origin::Screened`]).
     #[serde(default = "search_origin")]
     pub origin: String,
 }

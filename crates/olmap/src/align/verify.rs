@@ -195,10 +195,12 @@ pub struct Verification {
     pub unverified: Unverified,
 }
 
-/// The search's distinct near-best poses (its cluster heads, scoring at least its
-/// `keep_ratio` of the best: [`Alignment::ambiguity`]) that no refinement started or
-/// ended near ([`COVER_ROTATION`], and the refinement's reach in metres), and that, in a
-/// window search, lie about as near the prior as the winner.
+/// How many of the search's distinct near-best poses (its cluster heads, scoring at least
+/// its `keep_ratio` of the best: [`Alignment::ambiguity`]) the verification did not
+/// examine: `listed` counts the listed heads no refinement started or ended near
+/// ([`COVER_ROTATION`], and the refinement's reach in metres) that, in a window search,
+/// lie about as near the prior as the winner; `heads` and `unlisted` know no poses and are
+/// not filtered.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Unverified {
     /// Every head ([`Alignment::ambiguity`]).
@@ -250,9 +252,13 @@ pub const COVER_ROTATION: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// fits as well as the best hypothesis, or is supported at least [`CLEANER_MIN_SUPPORT`]
 /// as well and contradicted by the verdict's `min_refutation` standard deviations less
 /// (the cleaner-rival test, which then decides). The heads left here are the screened
-/// ones that could not beat the winner (global searches), or, in a window or locus search,
-/// the unscreened ones about as near the prior as the winner; `unlisted` are heads the
-/// search did not keep, which the verdict doubts a global match for.
+/// ones that could not beat the winner (global searches whose heads were all listed), or
+/// unscreened ones: those of a global search with heads beyond its list (the verdict
+/// doubts it whatever a screening would find), or, in a window or locus search, those
+/// about as near the prior as the winner; `unlisted` are heads the search did not keep.
+/// The exact search lists and counts at most
+/// [`EXACT_MAX_AMBIGUITY`](crate::align::EXACT_MAX_AMBIGUITY) heads, so its `unlisted`
+/// is always 0 (a gap: a capped exact search is not doubted for it).
 pub fn unverified_look_alikes(
     search: &Alignment,
     examined: &[Pose],
@@ -814,7 +820,10 @@ fn near_pose(a: &Pose, b: &Pose, reach: f64) -> bool {
 /// counted the same way (`best`): it fits at least as well already, or the scans support
 /// it at least [`CLEANER_MIN_SUPPORT`] as well and contradict it `min_refutation` standard
 /// deviations less (the verdict's cleaner-rival test, [`Verification::cleaner_rival`]).
-/// Refinement only raises a pose's fit, so either says the look-alike deserves one.
+/// A heuristic: refinement usually raises an unrefined pose's fit, so either says the
+/// look-alike deserves one. The counts are coarse ([`SCREEN_LEVEL`]: up to 16x fewer
+/// voxels near the sensor), so the same evidence makes a smaller z than at the finest
+/// level: the screen is stricter than the verdict's test.
 fn could_beat(best: &Consistency, quick: &Consistency, min_refutation: f64) -> bool {
     let both = |c: &Consistency| {
         let t = c.target.unwrap_or_default();
