@@ -157,14 +157,12 @@ pub struct Hypothesis {
 impl Hypothesis {
     /// Surface voxels of either scan that the other saw through at this hypothesis' pose.
     pub fn contradicted(&self) -> u64 {
-        let t = self.consistency.target.unwrap_or_default();
-        self.consistency.source.contradicted + t.contradicted
+        both_sides(&self.consistency).1
     }
 
     /// Surface voxels of either scan that the other supports at this hypothesis' pose.
     pub fn supported(&self) -> u64 {
-        let t = self.consistency.target.unwrap_or_default();
-        self.consistency.source.supported + t.supported
+        both_sides(&self.consistency).0
     }
 
     /// The final pose: refined when the refinement converged, else the search's.
@@ -328,7 +326,7 @@ impl Verification {
             .filter(|&&i| self.hypotheses[i].supported() as f64 >= CLEANER_MIN_SUPPORT * sw)
             .map(|&i| {
                 let cr = self.hypotheses[i].contradicted() as f64;
-                (i, (cw - cr) / (cw + cr + 1.0).sqrt())
+                (i, cleaner_sigma(cw, cr))
             })
             .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
     }
@@ -336,9 +334,8 @@ impl Verification {
 
 /// The fit of a consistency count (module documentation).
 pub fn fit(c: &Consistency) -> f64 {
-    let t = c.target.unwrap_or_default();
-    (c.source.supported + t.supported) as f64
-        - CONTRADICTION_WEIGHT * (c.source.contradicted + t.contradicted) as f64
+    let (supported, contradicted) = both_sides(c);
+    supported as f64 - CONTRADICTION_WEIGHT * contradicted as f64
 }
 
 /// Whether two refined poses are the same solution: at most
@@ -825,16 +822,26 @@ fn near_pose(a: &Pose, b: &Pose, reach: f64) -> bool {
 /// voxels near the sensor), so the same evidence makes a smaller z than at the finest
 /// level: the screen is stricter than the verdict's test.
 fn could_beat(best: &Consistency, quick: &Consistency, min_refutation: f64) -> bool {
-    let both = |c: &Consistency| {
-        let t = c.target.unwrap_or_default();
-        (
-            (c.source.supported + t.supported) as f64,
-            (c.source.contradicted + t.contradicted) as f64,
-        )
-    };
-    let ((sq, cq), (sw, cw)) = (both(quick), both(best));
+    let ((sq, cq), (sw, cw)) = (both_sides(quick), both_sides(best));
+    let (sq, cq, sw, cw) = (sq as f64, cq as f64, sw as f64, cw as f64);
     fit(quick) >= fit(best)
-        || (sq >= CLEANER_MIN_SUPPORT * sw && (cw - cq) / (cw + cq + 1.0).sqrt() >= min_refutation)
+        || (sq >= CLEANER_MIN_SUPPORT * sw && cleaner_sigma(cw, cq) >= min_refutation)
+}
+
+/// Supported and contradicted surface voxels of both scans' sides of a count.
+fn both_sides(c: &Consistency) -> (u64, u64) {
+    let t = c.target.unwrap_or_default();
+    (
+        c.source.supported + t.supported,
+        c.source.contradicted + t.contradicted,
+    )
+}
+
+/// How many standard deviations (of a Poisson count) fewer contradicted voxels a rival
+/// has (`cr`) than the winner (`cw`): the cleaner-rival measure
+/// ([`Verification::cleaner_rival`]).
+fn cleaner_sigma(cw: f64, cr: f64) -> f64 {
+    (cw - cr) / (cw + cr + 1.0).sqrt()
 }
 
 /// The hypothesis with the best fit (the earlier on a tie), `None` without any.
