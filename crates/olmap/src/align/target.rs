@@ -26,7 +26,8 @@ pub struct SearchTarget {
     pub(crate) pyramid: Pyramid,
     pub(crate) free: Vec<Option<DenseGrid>>,
     /// Per level, the occupied voxels as a dense grid, made when the agreement
-    /// ([`super::consistency`]) first asks for it and dropped when a scan is added.
+    /// ([`super::consistency`]) first asks for it; a scan added sets its voxels in the
+    /// grids made (growing their boxes).
     occupied: Vec<OnceLock<Option<DenseGrid>>>,
     /// Per level, what the search scores poses against (occupied and free cells, and the
     /// same as rows), made when a search first needs it and dropped when a scan is added:
@@ -192,9 +193,21 @@ impl SearchTarget {
         endpoints.check_keys(cloud, pose, "the target")?;
         endpoints.add_points(cloud, pose, 1);
         self.pyramid.merge(&endpoints)?;
-        self.occupied = (0..self.pyramid.levels())
-            .map(|_| OnceLock::new())
-            .collect();
+        // Occupancy only grows: a level's occupied grid made before takes the new voxels
+        // in place (its box grown to take them) rather than being made again over the
+        // whole level.
+        let levels = self.pyramid.levels();
+        let made = std::mem::replace(
+            &mut self.occupied,
+            (0..levels).map(|_| OnceLock::new()).collect(),
+        );
+        for (level, (cell, grid)) in self.occupied.iter().zip(made).enumerate() {
+            if let Some(grid) = grid.into_inner().flatten() {
+                if let Some(grid) = with_voxels(grid, &endpoints, level) {
+                    let _ = cell.set(Some(grid));
+                }
+            }
+        }
         self.grids = empty_grids(self.pyramid.levels());
         for level in 0..self.pyramid.levels() {
             let grid = self.free[level].take();
@@ -322,6 +335,40 @@ impl SearchTarget {
     pub fn has_free_space(&self) -> bool {
         self.free.iter().any(Option::is_some)
     }
+}
+
+/// `grid` (a level's [`SearchTarget::occupied_grid`]) with the voxels of `endpoints` (at
+/// the base resolution) set at pyramid level `level` (key `floor(k / 2^level)`), its box
+/// grown to hold them; `None` when the grown box would hold more than
+/// [`MAX_OCCUPIED_GRID_CELLS`] (the level is then answered as [`DenseGrid::occupied`]
+/// answers it: by the hash). The result equals [`DenseGrid::occupied`] of the merged level:
+/// the same box (the union of the old one and the new voxels') and the same cells.
+fn with_voxels(grid: DenseGrid, endpoints: &OccupancyList, level: usize) -> Option<DenseGrid> {
+    let f = 1i64 << level;
+    let keys: Vec<[i64; 3]> = endpoints
+        .iter()
+        .filter(|(_, c)| *c > 0)
+        .map(|(k, _)| [k.x as i64, k.y as i64, k.z as i64].map(|v| v.div_euclid(f)))
+        .collect();
+    let (mut lo, mut hi) = grid.bounds();
+    for k in &keys {
+        for i in 0..3 {
+            lo[i] = lo[i].min(k[i]);
+            hi[i] = hi[i].max(k[i]);
+        }
+    }
+    if box_cells((lo, hi)) > MAX_OCCUPIED_GRID_CELLS {
+        return None;
+    }
+    let mut grid = if (lo, hi) == grid.bounds() {
+        grid
+    } else {
+        grid.grown(lo, hi)?
+    };
+    for [x, y, z] in keys {
+        grid.set(x, y, z);
+    }
+    Some(grid)
 }
 
 /// Cells a ray is traced past `read_within` in [`add_free_space`]: a cell's half diagonal
@@ -472,5 +519,42 @@ mod tests {
         // Once the whole grid is made, every reach gets it.
         let again = target.cells_reaching(0, ([0, 0, 0], [50, 50, 50]));
         assert!(matches!(again, Some(SearchCells::Whole(_))));
+    }
+
+    /// Occupied grids made before a scan is added take its voxels in place (growing their
+    /// boxes, negative keys included) and end as a grid made afresh over the merged levels.
+    #[test]
+    fn occupied_grids_kept_across_added_scans_equal_grids_made_afresh() {
+        let mut s = 21u64;
+        let mut cloud = |cx: f64, cy: f64| {
+            let pts = (0..400)
+                .map(|_| {
+                    nalgebra::Point3::new(
+                        (cx + (lcg(&mut s) % 300) as f64 * 0.01) as f32,
+                        (cy + (lcg(&mut s) % 300) as f64 * 0.01) as f32,
+                        ((lcg(&mut s) % 150) as f64 * 0.01) as f32,
+                    )
+                })
+                .collect();
+            PointCloud::from_points(pts)
+        };
+        let mut target = SearchTarget::from_scans(&[], 0.1, 3).unwrap();
+        // Inside the first box, then growing it towards negative keys and away.
+        for (i, (cx, cy)) in [(0.0, 0.0), (0.5, 0.5), (-4.3, 1.0), (6.1, -7.7)]
+            .into_iter()
+            .enumerate()
+        {
+            let c = cloud(cx, cy);
+            let pose = Pose::from_xyz_ypr(0.2 * i as f64, -0.1, 0.0, 0.3 * i as f64, 0.0, 0.0);
+            target.add_scan(&c, &pose).unwrap();
+            for level in 0..3 {
+                let kept = target.occupied_grid(level).unwrap();
+                let fresh =
+                    DenseGrid::occupied(target.pyramid().level(level), MAX_OCCUPIED_GRID_CELLS)
+                        .unwrap();
+                assert_eq!(kept.bounds(), fresh.bounds(), "scan {i}, level {level}");
+                assert_eq!(kept.words(), fresh.words(), "scan {i}, level {level}");
+            }
+        }
     }
 }
