@@ -204,8 +204,8 @@ pub(super) fn look_alike_doubts(v: &Verification, global: bool) -> Vec<String> {
         return Vec::new();
     }
     vec![format!(
-        "the search found {} distinct poses scoring near its best, {} more than the \
-         verification examines: the place repeats too often to tell which is right",
+        "the search found at least {} distinct poses scoring near its best, {} more than \
+         the verification examines: the place repeats too often to tell which is right",
         u.heads, u.unlisted
     )]
 }

@@ -254,9 +254,9 @@ pub const COVER_ROTATION: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// unscreened ones: those of a global search with heads beyond its list (the verdict
 /// doubts it whatever a screening would find), or, in a window or locus search, those
 /// about as near the prior as the winner; `unlisted` are heads the search did not keep.
-/// The exact search lists and counts at most
-/// [`EXACT_MAX_AMBIGUITY`](crate::align::EXACT_MAX_AMBIGUITY) heads, so its `unlisted`
-/// is always 0 (a gap: a capped exact search is not doubted for it).
+/// The exact search lists at most
+/// [`EXACT_MAX_AMBIGUITY`](crate::align::EXACT_MAX_AMBIGUITY) heads and counts one more
+/// when there are more, so a capped exact search has one unlisted head.
 pub fn unverified_look_alikes(
     search: &Alignment,
     examined: &[Pose],

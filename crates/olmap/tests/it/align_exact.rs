@@ -1,8 +1,8 @@
 //! The exact (branch-and-bound) search against the exhaustive search (Algorithm 7) on
 //! small problems: every degree-of-freedom set, windows and the whole target, with and
 //! without free space. The exact search must return the exhaustive search's result: the
-//! same best score and pose, the same ambiguity and candidates (up to
-//! [`align::EXACT_MAX_AMBIGUITY`]).
+//! same best score and pose, the same candidates (up to [`align::EXACT_MAX_AMBIGUITY`])
+//! and ambiguity (up to one more: "more than the cap").
 
 use olmap::align::{self, Alignment, Dof, Region, SearchMode, SearchParams, SearchTarget};
 use olmap::geometry::Pose;
@@ -19,8 +19,8 @@ fn same(exact: &Alignment, sure: &Alignment, what: &str) {
     );
     assert_eq!(
         exact.ambiguity,
-        sure.ambiguity.min(align::EXACT_MAX_AMBIGUITY),
-        "{what}: ambiguity (counted up to the cap)"
+        sure.ambiguity.min(align::EXACT_MAX_AMBIGUITY + 1),
+        "{what}: ambiguity (counted up to one past the cap)"
     );
     // The exhaustive search lists up to 32 heads; the exact one counts (and lists) up to
     // its cap.
@@ -130,6 +130,15 @@ fn exact_equals_exhaustive_over_the_whole_target() {
     let exact = align::global_search(&source, &target, &params).unwrap();
     let sure = align::exhaustive_search(&source, &target, &params).unwrap();
     same(&exact, &sure, "whole target, every heading");
+    // More clusters than the exact search lists: it lists the cap and counts one more, so
+    // a verification sees a head it was not given (and a global match is doubted).
+    assert!(
+        sure.ambiguity > align::EXACT_MAX_AMBIGUITY,
+        "{}",
+        sure.ambiguity
+    );
+    assert_eq!(exact.ambiguity, align::EXACT_MAX_AMBIGUITY + 1);
+    assert_eq!(exact.candidates.len(), align::EXACT_MAX_AMBIGUITY);
     // This room is very ambiguous (30 clusters); each cluster is a further pass. With one
     // neighbourhood holding every pose, one pass finds the optimum and the second starts
     // with nothing left: the pruning alone must bound fewer nodes than there are poses.

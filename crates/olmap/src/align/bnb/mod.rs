@@ -35,8 +35,8 @@
 //! head is therefore the best pose outside the first `k` heads' neighbourhoods, which is
 //! what each further pass searches for (nodes wholly inside a neighbourhood are skipped,
 //! and `keep_ratio` of the best is a floor for the pruning), until none is left. The
-//! ambiguity and candidates are those of the exhaustive search, counted up to
-//! [`EXACT_MAX_AMBIGUITY`].
+//! ambiguity and candidates are those of the exhaustive search, listed up to
+//! [`EXACT_MAX_AMBIGUITY`] and counted up to one more (standing for "more than that").
 
 mod bound;
 mod grid;
@@ -81,9 +81,10 @@ const ROTATION_LAG: u32 = 2;
 /// scan001 against scan000 (global, x-y-z-yaw), bounds 36.5 million nodes of 2,516 voxels:
 /// 9.2e10, a fifth of this.
 pub const EXACT_MAX_WORK: u64 = 500_000_000_000;
-/// The exact search counts clusters (its [`Alignment::ambiguity`]) up to this many: each
-/// takes a pass, and a scene with more distinct solutions is ambiguous whatever their
-/// number. Below the cap the count is that of the exhaustive search.
+/// The exact search lists clusters (its [`Alignment::candidates`]) up to this many and
+/// counts them (its [`Alignment::ambiguity`]) up to one more, which stands for "more than
+/// this": each takes a pass, and a scene with more distinct solutions is ambiguous
+/// whatever their number. Up to the cap the count is that of the exhaustive search.
 pub const EXACT_MAX_AMBIGUITY: usize = 16;
 
 /// The exact search (see the module documentation). Locus regions are not handled here.
@@ -162,6 +163,9 @@ pub(super) fn exact_search(
         Some(s) if s.hits > 0 => finish(&problem, params, &found, &[], reports, start),
         _ => no_overlap(&problem, reports, start),
     };
+    // Past the cap the count stays one above it ("more than the cap") and the list stops
+    // at the cap: the heads beyond it are unlisted, as a capped list of the other searches'.
+    a.candidates.truncate(EXACT_MAX_AMBIGUITY);
     a.exact = true;
     Ok(a)
 }
@@ -210,7 +214,7 @@ fn check_roots(n_r: [i32; 3], n_t: [i32; 3], searched_r: [bool; 3], top: u32) ->
 }
 
 /// The passes (see the module documentation): the best pose of each cluster, best first,
-/// up to [`EXACT_MAX_AMBIGUITY`], with the nodes bounded and passed per level.
+/// up to one more than [`EXACT_MAX_AMBIGUITY`], with the nodes bounded and passed per level.
 fn passes(
     bnb: &Bnb,
     params: &SearchParams,
@@ -224,7 +228,8 @@ fn passes(
     let mut bounded = vec![0usize; n_levels];
     let mut passed = vec![0usize; n_levels];
     let mut floor = NO_SCORE;
-    while found.len() < EXACT_MAX_AMBIGUITY {
+    // One pass past the cap: a head beyond it says there are more than the cap.
+    while found.len() <= EXACT_MAX_AMBIGUITY {
         let pass = Pass {
             bnb,
             heads: &heads,

@@ -91,7 +91,8 @@ pub struct Alignment {
     pub seconds: f64,
     /// Whether the result is guaranteed: the best pose of the finest lattice over the whole
     /// region, with `ambiguity` and `candidates` those of [`crate::align::exhaustive_search`] (the exact
-    /// search counts clusters up to [`crate::align::EXACT_MAX_AMBIGUITY`]). Set by the exact search
+    /// search lists clusters up to [`crate::align::EXACT_MAX_AMBIGUITY`] and counts one more
+    /// when there are more). Set by the exact search
     /// ([`crate::align::SearchMode::Exact`]) and the exhaustive search; the multi-resolution
     /// search prunes heuristically and sets it false. Its resampling can also step a few
     /// cells or angular steps past the region's ends, outside this lattice (a global
