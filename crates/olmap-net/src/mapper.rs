@@ -259,7 +259,9 @@ pub const LIVE_REFINE_VOXEL: f64 = 0.1;
 /// records given one by one): seed 1 4.4 → 3.7 s, placement errors mean / largest 0.030 /
 /// 0.097 → 0.024 / 0.078 m; seed 2 5.1 → 5.0 s, 0.050 / 0.117 → 0.021 / 0.060 m; seed 3
 /// 7.8 → 7.4 s, 24 of 40 placed either way, 0.014 / 0.045 m. The written outputs keep the
-/// mapper's own parameters (they must equal `olmap team` on the same records).
+/// mapper's own parameters (they must equal `olmap team` on the same records). The cost of
+/// a record with these parameters is the `live_map` benchmark (`cargo bench -p olmap-net
+/// --bench live_map`).
 pub fn live_params(params: &TeamParams) -> TeamParams {
     let mut live = params.clone();
     live.map.refine_map_voxel = live.map.refine_map_voxel.max(LIVE_REFINE_VOXEL);

@@ -97,12 +97,14 @@ pub struct IcpParams {
     /// Neighbours (including the point itself) for PCA normals. Default `10`.
     pub normal_k: usize,
     /// Which target points a PCA normal comes from. Default
-    /// [`NormalNeighbourhood::Nearest`], in every mapper too: with
-    /// [`NormalNeighbourhood::VoxelBlock`] the live team map of the demo-size lab (4 robots
-    /// x 10 stops, degraded odometry) came out better on seed 1 (largest error 0.22 -> 0.07
-    /// m) but placed 1 of 40 scans on seed 2 and 10 of 40 on seed 4 (40 and 30 with the
-    /// nearest points), and put two scans of seed 5 more than 0.3 m off; in the batch
-    /// mappers the demo's solo maps placed 25 of 40.
+    /// [`NormalNeighbourhood::Nearest`]. The network's live mapper uses
+    /// [`NormalNeighbourhood::VoxelBlock`] on its map merged at 0.1 m (`olmap-net`'s
+    /// `live_params`: each placement rebuilds the map's target, and estimating the normals
+    /// it touches with a k-d tree query each was about a fifth of its time). Not with the
+    /// batch mappers' 0.05 m map: there the demo-size lab's live team (4 robots x 10 stops,
+    /// degraded odometry) placed 1 of 40 scans on seed 2 and 10 of 40 on seed 4 (40 and 30
+    /// with the nearest points; 3 x 3 x 3 blocks of 5 cm hold too few points of a sparse
+    /// surface), and the demo's solo maps 25 of 40.
     pub normal_neighbourhood: NormalNeighbourhood,
     /// Minimum planarity `(λ1 - λ0) / λ2` of a neighbourhood for its PCA normal to be used, in
     /// `[0, 1]`. Default `0.2`: rejects lines (scan-line fragments, poles) and scattered
