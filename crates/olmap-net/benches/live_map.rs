@@ -14,8 +14,8 @@ use std::sync::OnceLock;
 
 use divan::Bencher;
 use olmap::geometry::PoseList;
-use olmap::sim::{simulate, OdometryNoise, SimConfig, WorldKind};
 use olmap::team::{LiveTeam, ScanStore, TeamParams};
+use olmap_net::demo_lab;
 use olmap_net::mapper::live_params;
 use olmap_net::robot::occupancy_store;
 
@@ -30,15 +30,7 @@ const RESOLUTION: f64 = 0.1;
 fn records() -> &'static (ScanStore, PoseList) {
     static D: OnceLock<(ScanStore, PoseList)> = OnceLock::new();
     D.get_or_init(|| {
-        let config = SimConfig {
-            world: WorldKind::Lab,
-            seed: 1,
-            robots: 4,
-            stops: 10,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        };
-        let data = simulate(&config, |_, _| {}).expect("the demo's team simulates");
+        let data = demo_lab(1, 4, 10).expect("the demo's team simulates");
         let raw = data.to_store().expect("a store");
         let truth = data.truth_list(&raw);
         let store = occupancy_store(&raw, RESOLUTION).expect("occupancy records");

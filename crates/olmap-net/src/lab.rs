@@ -6,7 +6,7 @@ use olmap::sim::{simulate, OdometryNoise, SimConfig, SimDataset, WorldKind};
 use crate::error::{NetError, Result};
 
 /// The demo's team: the lab world, degraded odometry (thesis §6.5), `robots` × `stops`.
-pub(crate) fn demo_lab(seed: u64, robots: usize, stops: usize) -> Result<SimDataset> {
+pub fn demo_lab(seed: u64, robots: usize, stops: usize) -> Result<SimDataset> {
     Ok(simulate(
         &SimConfig {
             world: WorldKind::Lab,

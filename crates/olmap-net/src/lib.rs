@@ -74,6 +74,7 @@ pub mod watch;
 pub use durable::DurableStore;
 pub use error::{BadMessage, NetError, Result};
 pub use fault::{FaultPlan, Faults, Outgoing, HOLD_LIMIT};
+pub use lab::demo_lab;
 pub use node::{MapFigures, NetOptions, Node, NodeOptions};
 pub use protocol::{Digest, FetchRequest, Keys, RecordMessage};
 pub use status::{quantile, Counters, NodeStatus, RobotStatus};
