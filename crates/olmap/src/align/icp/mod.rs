@@ -12,7 +12,10 @@
 //!   [`IcpParams::source_voxel`], target [`IcpParams::target_voxel`]): this evens out the
 //!   density of scanners, which is very high near the sensor, and bounds the cost. A k-d tree
 //!   ([`kiddo`]) is built once over the target points. [`IcpTarget`] keeps a prepared
-//!   target for many refinements ([`refine_to`]).
+//!   target for many refinements ([`refine_to`]). A mapper's map is indexed in 4 m column
+//!   tiles instead, a tree each, and brought up to date after each placement by indexing
+//!   again only the tiles the new scan changed and forgetting only the normals it reached
+//!   (`tiles.rs`; the answers are those of one tree over the whole map).
 //! * **Loose, then tight.** The schedule first runs to convergence at ten times the
 //!   epsilons, optionally on a source downsampled [`IcpParams::coarse_voxel_factor`] times
 //!   coarser (off by default), then continues on the source at [`IcpParams::source_voxel`]
@@ -102,6 +105,7 @@ mod params;
 mod reduce;
 mod solve;
 mod target;
+mod tiles;
 
 use std::time::Instant;
 

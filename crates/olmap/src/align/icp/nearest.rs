@@ -9,7 +9,6 @@
 //! a fresh query every time (up to which of two target points exactly equidistant from
 //! `q'` is taken), so the result does not change.
 
-use kiddo::SquaredEuclidean;
 use nalgebra::Point3;
 
 use super::target::{IcpSource, Target};
@@ -128,14 +127,11 @@ pub(super) fn nearest(
             _ => {}
         }
     }
-    let found = tgt
-        .tree
-        .query(&[q.x, q.y, q.z])
-        .nearest_n::<SquaredEuclidean<f64>>(
-            std::num::NonZeroUsize::new(CANDIDATES).expect("CANDIDATES > 0"),
-        )
-        .within(gate2)
-        .execute();
+    let found = tgt.nearest(
+        q,
+        std::num::NonZeroUsize::new(CANDIDATES).expect("CANDIDATES > 0"),
+        Some(gate2),
+    );
     if found.iter().any(|r| r.distance.is_nan()) || gate.is_nan() {
         *memo = Remembered::NONE;
         return None;

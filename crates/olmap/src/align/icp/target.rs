@@ -7,8 +7,9 @@ use std::sync::OnceLock;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
+use super::tiles::{tile_gap, Near, TileKey, Tiles};
 use super::{IcpParams, NormalNeighbourhood};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -166,7 +167,7 @@ impl IcpTarget {
     pub fn new(target: &PointCloud, params: &IcpParams) -> Result<Self> {
         params.validate()?;
         Ok(IcpTarget {
-            inner: Target::new(target, params, None)?,
+            inner: Target::new(target, params, None, false)?,
             prepared_with: Preparation::of(params),
         })
     }
@@ -176,16 +177,44 @@ impl IcpTarget {
     /// divides it a whole number of times, the downsampling would change nothing and is
     /// skipped (each finer voxel lies inside one of the cloud's, so it holds at most that
     /// voxel's point).
-    pub(crate) fn of_voxel_centroids(
+    ///
+    /// The points are indexed in column tiles ([`super::tiles`]), so that
+    /// [`IcpTarget::updated`] can follow a map that grows: a mapper's map.
+    pub(crate) fn of_map(target: &PointCloud, params: &IcpParams, voxel: f64) -> Result<Self> {
+        params.validate()?;
+        Ok(IcpTarget {
+            inner: Target::new(target, params, Some(voxel), true)?,
+            prepared_with: Preparation::of(params),
+        })
+    }
+
+    /// `self` (made by [`IcpTarget::of_map`]) brought up to `target`, the map's points now:
+    /// the same cloud with points appended and some moved (a
+    /// [`crate::cloud::VoxelMerge`]'s after more scans were merged: voxels keep their
+    /// order, centroids move). Only the tiles that gained or moved a point are indexed
+    /// again, and only the estimated normals whose neighbourhood reaches a moved or new
+    /// point are forgotten; the result answers as [`IcpTarget::of_map`] of `target` would
+    /// (up to which of two exactly equidistant points is taken). Anything else (another
+    /// preparation, fewer points, a target not made by [`IcpTarget::of_map`], a block
+    /// normal's voxel changed by a moved point) is prepared afresh.
+    pub(crate) fn updated(
+        self,
         target: &PointCloud,
         params: &IcpParams,
         voxel: f64,
     ) -> Result<Self> {
         params.validate()?;
-        Ok(IcpTarget {
-            inner: Target::new(target, params, Some(voxel))?,
-            prepared_with: Preparation::of(params),
-        })
+        if self.prepared_for(params) && nests(params.target_voxel, voxel) {
+            if let Some(mut inner) = self.inner {
+                if inner.follow(target, params)? {
+                    return Ok(IcpTarget {
+                        inner: Some(inner),
+                        prepared_with: self.prepared_with,
+                    });
+                }
+            }
+        }
+        IcpTarget::of_map(target, params, voxel)
     }
 
     /// Points after downsampling.
@@ -210,11 +239,13 @@ pub(super) enum Normals {
     /// The cloud's own, unit length (zero where unusable).
     Given(Vec<Vector3<f64>>),
     /// PCA of the point's neighbourhood, computed on first use (zero where the
-    /// neighbourhood is not planar enough).
+    /// neighbourhood is not planar enough), kept with the neighbourhood's reach (no point
+    /// farther than it from the point took part: [`Target::follow`] forgets the normal
+    /// when a point within it moved or arrived).
     Estimated {
         neighbourhood: Neighbourhood,
         min_planarity: f64,
-        cache: Vec<OnceLock<Vector3<f64>>>,
+        cache: Vec<OnceLock<(Vector3<f64>, f64)>>,
     },
 }
 
@@ -235,27 +266,37 @@ const MIN_NORMAL_POINTS: usize = 3;
 
 /// Targets of at least this many points build their k-d tree on the rayon pool (kiddo's
 /// parallel construction; the tree, and so every answer, is the same as a serial build's).
-/// Only maps reach it: a mapper's whole map, which is indexed again after every placement
-/// (a quarter of the time of the large warehouse's incremental map building), and the map
-/// a scan is localised in. 250 warehouse lidar scans mapped incrementally: 228.7 s with
-/// serial trees, 217.0 s with this threshold, the same poses and map byte for byte; `olmap
-/// demo` within its run-to-run spread (kiddo's own default threshold, 2^18).
+/// Only maps reach it: the map a scan is localised in (a mapper's map is indexed in tiles
+/// instead, [`IcpTarget::of_map`], each built serially and the tiles in parallel). When
+/// the mappers still built one tree of their whole map after every placement, 250
+/// warehouse lidar scans mapped incrementally took 228.7 s with serial trees and 217.0 s
+/// with this threshold, the same poses and map byte for byte (kiddo's own default
+/// threshold, 2^18).
 const PARALLEL_TREE_POINTS: usize = 262_144;
 
-/// The downsampled target with its normals and k-d tree.
+/// The downsampled target with its normals and its index.
 pub(super) struct Target {
     pub(super) points: Vec<Point3<f64>>,
     normals: Normals,
-    pub(super) tree: ImmutableKdTree<f64, 3>,
+    index: PointIndex,
+}
+
+/// How a target's points are indexed.
+enum PointIndex {
+    /// One k-d tree over every point (items: point indices).
+    Whole(ImmutableKdTree<f64, 3>),
+    /// Column tiles, a tree each: a map that grows ([`IcpTarget::of_map`]).
+    Tiled(Tiles),
 }
 
 impl Target {
     /// `None` when the target has no finite point; `downsampled_at`: the voxel `target`
-    /// was already downsampled at, if any.
+    /// was already downsampled at, if any; `tiled`: indexed in tiles, not one tree.
     fn new(
         target: &PointCloud,
         params: &IcpParams,
         downsampled_at: Option<f64>,
+        tiled: bool,
     ) -> Result<Option<Self>> {
         // The voxel the points are one per (none: any number per voxel).
         let (cloud, one_per) = match downsampled_at {
@@ -285,27 +326,21 @@ impl Target {
         if points.is_empty() {
             return Ok(None);
         }
-        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let tree = ImmutableKdTree::<f64, 3>::builder()
-            .with_parallel_construction_threshold(PARALLEL_TREE_POINTS)
-            .build_from_slice(&coords)
-            .map_err(|e| {
-                Error::InvalidArgument(format!("ICP: cannot index the target points: {e}"))
-            })?;
-        let normals = if given.is_some() {
-            Normals::Given(
-                normals_in
-                    .iter()
-                    .map(|n| {
-                        let len = n.norm();
-                        if len.is_finite() && len > 0.5 {
-                            n / len
-                        } else {
-                            Vector3::zeros()
-                        }
-                    })
-                    .collect(),
+        let index = if tiled {
+            PointIndex::Tiled(Tiles::new(&points)?)
+        } else {
+            let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+            PointIndex::Whole(
+                ImmutableKdTree::<f64, 3>::builder()
+                    .with_parallel_construction_threshold(PARALLEL_TREE_POINTS)
+                    .build_from_slice(&coords)
+                    .map_err(|e| {
+                        Error::InvalidArgument(format!("ICP: cannot index the target points: {e}"))
+                    })?,
             )
+        };
+        let normals = if given.is_some() {
+            Normals::Given(normals_in.iter().map(unit_or_zero).collect())
         } else {
             let neighbourhood = match (params.normal_neighbourhood, one_per) {
                 (NormalNeighbourhood::VoxelBlock, Some(voxel)) => Neighbourhood::VoxelBlock {
@@ -326,7 +361,7 @@ impl Target {
         Ok(Some(Target {
             points,
             normals,
-            tree,
+            index,
         }))
     }
 
@@ -340,34 +375,153 @@ impl Target {
                 neighbourhood,
                 min_planarity,
                 cache,
-            } => *cache[i].get_or_init(|| self.estimate_normal(i, neighbourhood, *min_planarity)),
+            } => {
+                cache[i]
+                    .get_or_init(|| self.estimate_normal(i, neighbourhood, *min_planarity))
+                    .0
+            }
         }
     }
 
+    /// The `n` target points nearest `q`, nearest first, only those within `max_distance2`
+    /// (squared metres) when given.
+    pub(super) fn nearest(
+        &self,
+        q: &Point3<f64>,
+        n: NonZeroUsize,
+        max_distance2: Option<f64>,
+    ) -> Vec<Near> {
+        match &self.index {
+            PointIndex::Whole(tree) => {
+                let at = [q.x, q.y, q.z];
+                let query = tree.query(&at).nearest_n::<SquaredEuclidean<f64>>(n);
+                let found = match max_distance2 {
+                    Some(m) => query.within(m).execute(),
+                    None => query.execute(),
+                };
+                found
+                    .iter()
+                    .map(|f| Near {
+                        item: f.item,
+                        distance: f.distance,
+                    })
+                    .collect()
+            }
+            PointIndex::Tiled(tiles) => tiles.nearest(q, n, max_distance2),
+        }
+    }
+
+    /// Brings the target up to `cloud` (see [`IcpTarget::updated`]); `false` (nothing
+    /// changed) when it cannot follow and must be prepared afresh.
+    fn follow(&mut self, cloud: &PointCloud, params: &IcpParams) -> Result<bool> {
+        let PointIndex::Tiled(tiles) = &mut self.index else {
+            return Ok(false);
+        };
+        let old_len = self.points.len();
+        if cloud.len() < old_len {
+            return Ok(false);
+        }
+        let now: Vec<Point3<f64>> = cloud.points().iter().map(|p| p.cast::<f64>()).collect();
+        if !now.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+            return Ok(false);
+        }
+        let given = match (&self.normals, params.use_target_normals, cloud.normals()) {
+            (Normals::Given(_), true, Some(ns)) => Some(ns),
+            (Normals::Estimated { .. }, false, _) | (Normals::Estimated { .. }, true, None) => None,
+            _ => return Ok(false),
+        };
+        let given_now = |i: usize| given.map(|ns| unit_or_zero(&ns[i].cast::<f64>()));
+        let moved: Vec<(u32, Point3<f64>)> = (0..old_len)
+            .filter(|&i| {
+                now[i] != self.points[i]
+                    || matches!(&self.normals, Normals::Given(ns) if Some(ns[i]) != given_now(i))
+            })
+            .map(|i| (i as u32, self.points[i]))
+            .collect();
+        if moved.is_empty() && now.len() == old_len {
+            return Ok(true);
+        }
+        match &mut self.normals {
+            Normals::Given(ns) => {
+                for &(i, _) in &moved {
+                    ns[i as usize] = given_now(i as usize).expect("given normals");
+                }
+                ns.extend((old_len..now.len()).map(|i| given_now(i).expect("given normals")));
+            }
+            Normals::Estimated {
+                neighbourhood,
+                cache,
+                ..
+            } => {
+                match neighbourhood {
+                    Neighbourhood::Nearest(k) => {
+                        // Fewer points than `normal_k` (a map's first scans): every
+                        // normal's neighbourhood changes size.
+                        if k.get() < params.normal_k && now.len() > k.get() {
+                            return Ok(false);
+                        }
+                    }
+                    Neighbourhood::VoxelBlock { voxel, cells } => {
+                        let key = |p: &Point3<f64>| VoxelKey::from_point(p, *voxel);
+                        if moved
+                            .iter()
+                            .any(|&(i, was)| key(&was) != key(&now[i as usize]))
+                        {
+                            return Ok(false);
+                        }
+                        for (i, p) in now.iter().enumerate().skip(old_len) {
+                            if let Some(k) = key(p) {
+                                cells.entry(k).or_insert(i as u32);
+                            }
+                        }
+                    }
+                }
+                // The positions a neighbourhood may have gained or lost.
+                let mut changed: Vec<[f64; 3]> = Vec::with_capacity(2 * moved.len());
+                for &(i, was) in &moved {
+                    let p = now[i as usize];
+                    changed.push([was.x, was.y, was.z]);
+                    changed.push([p.x, p.y, p.z]);
+                    cache[i as usize].take();
+                }
+                changed.extend(now[old_len..].iter().map(|p| [p.x, p.y, p.z]));
+                cache.extend((old_len..now.len()).map(|_| OnceLock::new()));
+                forget_normals_near(cache, &self.points, tiles, &changed, neighbourhood)?;
+            }
+        }
+        self.points = now;
+        tiles.update(&self.points, old_len, &moved)?;
+        Ok(true)
+    }
+
     /// PCA normal of target point `i` from its neighbourhood; zero where the neighbourhood
-    /// has fewer than [`MIN_NORMAL_POINTS`] points or is not planar enough.
+    /// has fewer than [`MIN_NORMAL_POINTS`] points or is not planar enough. With it, the
+    /// neighbourhood's reach: no point farther from the point took part, nor would have
+    /// had it been nearer (the `k`-th nearest's distance, infinite when every point took
+    /// part; for a block, the farthest a point of the 3 × 3 × 3 voxels can be).
     fn estimate_normal(
         &self,
         i: usize,
         neighbourhood: &Neighbourhood,
         min_planarity: f64,
-    ) -> Vector3<f64> {
+    ) -> (Vector3<f64>, f64) {
         let c = self.points[i];
         // The `k` nearest points as they are, or a block's (at most 27) relative to the
         // point itself (precision far from the origin).
         let mut near: Vec<Vector3<f64>> = Vec::with_capacity(28);
-        match neighbourhood {
+        let reach = match neighbourhood {
             Neighbourhood::Nearest(k) => {
-                let nn = self
-                    .tree
-                    .query(&[c.x, c.y, c.z])
-                    .nearest_n::<SquaredEuclidean<f64>>(*k)
-                    .execute();
+                let nn = self.nearest(&c, *k, None);
                 near.extend(nn.iter().map(|r| self.points[r.item as usize].coords));
+                if nn.len() < k.get() || self.points.len() <= k.get() {
+                    f64::INFINITY
+                } else {
+                    nn.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
+                }
             }
             Neighbourhood::VoxelBlock { voxel, cells } => {
                 let Some(key) = VoxelKey::from_point(&c, *voxel) else {
-                    return Vector3::zeros();
+                    return (Vector3::zeros(), f64::INFINITY);
                 };
                 // The point itself even where rounding put it in a neighbour's voxel.
                 near.push(Vector3::zeros());
@@ -390,10 +544,12 @@ impl Target {
                         }
                     }
                 }
+                // The point lies in its voxel, a block point within the next one out.
+                2.0 * 3f64.sqrt() * voxel
             }
-        }
+        };
         if near.len() < MIN_NORMAL_POINTS {
-            return Vector3::zeros();
+            return (Vector3::zeros(), reach);
         }
         let n = near.len() as f64;
         let mean = near.iter().sum::<Vector3<f64>>() / n;
@@ -402,7 +558,107 @@ impl Target {
             let d = d - mean;
             cov += d * d.transpose();
         }
-        plane_normal(&(cov / n), min_planarity)
+        (plane_normal(&(cov / n), min_planarity), reach)
+    }
+}
+
+/// Slack on a normal's reach against rounding (metres): a point this much beyond the
+/// reach still counts as inside it.
+const REACH_SLACK: f64 = 1e-6;
+
+/// Side of the cells [`forget_normals_near`] marks around changed points (metres): at
+/// least a normal's usual reach (the 10 nearest of a 0.05 m map lie within about 0.15 m).
+const CHANGE_CELL: f64 = 0.25;
+
+/// Forgets every kept normal of `points` whose neighbourhood's reach includes one of
+/// `changed` (positions where a point arrived, left or moved to). A normal whose reach is
+/// at most the cell size is forgotten when a changed point lies in its cell or one next to
+/// it (which every changed point within the reach does: some normals are forgotten that
+/// would have stayed the same, and are computed again, the same); a longer reach asks a
+/// tree of the changed points. Tiles farther from every changed point's tile than each of
+/// their normals' reach are skipped.
+fn forget_normals_near(
+    cache: &mut [OnceLock<(Vector3<f64>, f64)>],
+    points: &[Point3<f64>],
+    tiles: &Tiles,
+    changed: &[[f64; 3]],
+    neighbourhood: &Neighbourhood,
+) -> Result<()> {
+    let side = match neighbourhood {
+        Neighbourhood::VoxelBlock { voxel, .. } => CHANGE_CELL.max(2.0 * 3f64.sqrt() * voxel),
+        Neighbourhood::Nearest(_) => CHANGE_CELL,
+    } + REACH_SLACK;
+    let cell = |c: &[f64; 3]| c.map(|v| (v / side).floor() as i64);
+    let mut cells: Vec<[i64; 3]> = changed.iter().map(cell).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    let mut marked: FxHashSet<[i64; 3]> = FxHashSet::default();
+    marked.reserve(27 * cells.len());
+    for c in &cells {
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    marked.insert([c[0] + dx, c[1] + dy, c[2] + dz]);
+                }
+            }
+        }
+    }
+    let mut changed_tiles: Vec<TileKey> = changed
+        .iter()
+        .map(|c| super::tiles::tile_of(&Point3::new(c[0], c[1], c[2])))
+        .collect();
+    changed_tiles.sort_unstable();
+    changed_tiles.dedup();
+    // Made only if some normal reaches farther than a cell.
+    let mut far: Option<ImmutableKdTree<f64, 3>> = None;
+    for (key, members) in tiles.each() {
+        let reach = members
+            .iter()
+            .filter_map(|&m| cache[m as usize].get().map(|c| c.1))
+            .fold(f64::NEG_INFINITY, f64::max);
+        if reach < 0.0 || changed_tiles.iter().all(|&c| tile_gap(key, c) > reach) {
+            continue;
+        }
+        for &m in members {
+            let Some(&(_, r)) = cache[m as usize].get() else {
+                continue;
+            };
+            let p = points[m as usize];
+            let forget = if r + REACH_SLACK <= side {
+                marked.contains(&cell(&[p.x, p.y, p.z]))
+            } else {
+                if far.is_none() {
+                    far = Some(ImmutableKdTree::<f64, 3>::new_from_slice(changed).map_err(
+                        |e| {
+                            Error::InvalidArgument(format!(
+                                "ICP: cannot index the map's change: {e}"
+                            ))
+                        },
+                    )?);
+                }
+                let nearest = far
+                    .as_ref()
+                    .expect("made above")
+                    .query(&[p.x, p.y, p.z])
+                    .nearest_one::<SquaredEuclidean<f64>>()
+                    .execute();
+                nearest.distance.sqrt() <= r + REACH_SLACK
+            };
+            if forget {
+                cache[m as usize].take();
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `n` scaled to unit length, or zero when it is not finite or shorter than a half.
+fn unit_or_zero(n: &Vector3<f64>) -> Vector3<f64> {
+    let len = n.norm();
+    if len.is_finite() && len > 0.5 {
+        n / len
+    } else {
+        Vector3::zeros()
     }
 }
 
@@ -482,7 +738,7 @@ mod tests {
             normal_neighbourhood: NormalNeighbourhood::VoxelBlock,
             ..Default::default()
         };
-        let prepared = IcpTarget::of_voxel_centroids(&cloud, &params, 0.1).unwrap();
+        let prepared = IcpTarget::of_map(&cloud, &params, 0.1).unwrap();
         let t = prepared.inner.as_ref().unwrap();
         assert!(matches!(
             &t.normals,
@@ -554,12 +810,118 @@ mod tests {
         let finer = cloud.voxel_downsample(0.05).unwrap();
         assert_eq!(finer.points(), cloud.points());
         let params = IcpParams::default();
-        let skipped = IcpTarget::of_voxel_centroids(&cloud, &params, 0.1).unwrap();
+        let skipped = IcpTarget::of_map(&cloud, &params, 0.1).unwrap();
         let downsampled = IcpTarget::new(&cloud, &params).unwrap();
         assert_eq!(
             skipped.inner.as_ref().unwrap().points,
             downsampled.inner.as_ref().unwrap().points
         );
+    }
+
+    /// A scan of a 12 x 12 m room (floor, walls, a pillar) seen from `(x, y)`: points within
+    /// 7 m, jittered by 1 cm, with normals.
+    fn room_scan(rng: &mut SimRng, x: f64, y: f64) -> PointCloud {
+        let mut points = Vec::new();
+        let mut normals = Vec::new();
+        for _ in 0..12_000 {
+            let (u, v) = (rng.range(-6.0, 6.0), rng.range(0.0, 3.0));
+            let (p, n) = match rng.range(0.0, 6.0) as u32 {
+                0 | 1 => (
+                    Point3::new(u, rng.range(-6.0, 6.0), 0.0),
+                    Vector3::new(0.0, 0.0, 1.0),
+                ),
+                2 => (Point3::new(-6.0, u, v), Vector3::new(1.0, 0.0, 0.0)),
+                3 => (Point3::new(6.0, u, v), Vector3::new(-1.0, 0.0, 0.0)),
+                4 => (Point3::new(u, 6.0, v), Vector3::new(0.0, -1.0, 0.0)),
+                _ => (
+                    Point3::new(1.0 + 0.3 * u.cos(), 0.5 + 0.3 * u.sin(), v),
+                    Vector3::new(u.cos(), u.sin(), 0.0),
+                ),
+            };
+            if (p.x - x).hypot(p.y - y) < 7.0 {
+                let jitter = Vector3::new(
+                    rng.range(-0.01, 0.01),
+                    rng.range(-0.01, 0.01),
+                    rng.range(-0.01, 0.01),
+                );
+                points.push((p + jitter).cast::<f32>());
+                normals.push(n.cast::<f32>());
+            }
+        }
+        let mut cloud = PointCloud::from_points(points);
+        cloud.set_normals(Some(normals)).unwrap();
+        cloud
+    }
+
+    /// A map target brought up to a growing merge scan by scan answers exactly as one made
+    /// afresh from the merge: the same points, the same nearest points, and the same
+    /// normals, estimated ones included that were computed before the map changed and kept
+    /// (the neighbourhood of k nearest and of voxel blocks) or given by the scans.
+    #[test]
+    fn a_map_target_brought_up_to_date_answers_as_one_made_afresh() {
+        for (neighbourhood, use_target_normals) in [
+            (NormalNeighbourhood::Nearest, false),
+            (NormalNeighbourhood::VoxelBlock, false),
+            (NormalNeighbourhood::Nearest, true),
+        ] {
+            let params = IcpParams {
+                normal_neighbourhood: neighbourhood,
+                use_target_normals,
+                ..Default::default()
+            };
+            let mut rng = SimRng::new(5);
+            let mut merge = VoxelMerge::new(0.05).unwrap();
+            let mut kept: Option<IcpTarget> = None;
+            for (x, y) in [
+                (-3.0, -3.0),
+                (-1.0, -2.5),
+                (2.0, -1.0),
+                (3.0, 3.0),
+                (-2.0, 2.5),
+            ] {
+                let scan = room_scan(&mut rng, x, y);
+                let pose = Pose::from_xyz_ypr(x * 0.01, 0.0, 0.0, 0.0, 0.0, 0.0);
+                merge
+                    .add(&scan.transformed(&pose.inverse()), &pose)
+                    .unwrap();
+                let cloud = merge.cloud();
+                let was_kept = kept.is_some();
+                let target = match kept.take() {
+                    Some(t) => t.updated(&cloud, &params, 0.05).unwrap(),
+                    None => IcpTarget::of_map(&cloud, &params, 0.05).unwrap(),
+                };
+                let fresh = IcpTarget::of_map(&cloud, &params, 0.05).unwrap();
+                let (t, f) = (
+                    target.inner.as_ref().unwrap(),
+                    fresh.inner.as_ref().unwrap(),
+                );
+                assert_eq!(t.points, f.points);
+                // Brought up to date, not made afresh: normals known before the scan and
+                // out of its reach are kept, those within it forgotten.
+                if let (Normals::Estimated { cache, .. }, true) = (&t.normals, was_kept) {
+                    let known = cache.iter().filter(|c| c.get().is_some()).count();
+                    assert!(
+                        known > 0 && known < cache.len(),
+                        "{known} of {}",
+                        cache.len()
+                    );
+                }
+                for i in 0..t.points.len() {
+                    assert_eq!(t.normal(i), f.normal(i), "normal {i} ({neighbourhood:?})");
+                }
+                let k = NonZeroUsize::new(4).unwrap();
+                for _ in 0..2_000 {
+                    let q = Point3::new(
+                        rng.range(-7.0, 7.0),
+                        rng.range(-7.0, 7.0),
+                        rng.range(-0.5, 3.5),
+                    );
+                    assert_eq!(t.nearest(&q, k, Some(0.25)), f.nearest(&q, k, Some(0.25)));
+                }
+                // Every normal is now known: the next scan must forget those it changes.
+                kept = Some(target);
+            }
+        }
     }
 
     /// A target large enough to build its tree in parallel answers every nearest-point
@@ -604,8 +966,10 @@ mod tests {
                 rng.range(-21.0, 21.0),
                 rng.range(-0.5, 3.5),
             ];
-            let a = t
-                .tree
+            let PointIndex::Whole(tree) = &t.index else {
+                panic!("one tree");
+            };
+            let a = tree
                 .query(&q)
                 .nearest_n::<SquaredEuclidean<f64>>(k)
                 .within(0.25)

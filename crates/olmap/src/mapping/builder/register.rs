@@ -153,14 +153,25 @@ impl State<'_> {
     }
 
     /// The map's points prepared for ICP with `icp`'s target parameters: once per map, not
-    /// once per registration. (Registrations in parallel that find it missing may each
-    /// prepare it and keep one copy: the batch mapper prepares it before a parallel round.)
+    /// once per registration, and after the map grew by bringing the last one up to it
+    /// ([`IcpTarget::updated`]). (Registrations in parallel that find it missing may each
+    /// prepare it, the first from the last one and the others afresh, and keep one: the
+    /// batch mapper prepares it before a parallel round. No lock is held while preparing:
+    /// the work runs on the rayon pool, whose threads may be running other registrations.)
     pub(super) fn prepared_map(&self, icp: &IcpParams) -> Result<&IcpTarget> {
         if let Some(p) = self.refine_prepared.get() {
             return Ok(p);
         }
-        let p =
-            IcpTarget::of_voxel_centroids(self.refine_points(), icp, self.params.refine_map_voxel)?;
+        let last = self
+            .refine_stale
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        let (map, voxel) = (self.refine_points(), self.params.refine_map_voxel);
+        let p = match last {
+            Some(last) => last.updated(map, icp, voxel)?,
+            None => IcpTarget::of_map(map, icp, voxel)?,
+        };
         Ok(self.refine_prepared.get_or_init(|| p))
     }
 

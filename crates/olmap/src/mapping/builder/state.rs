@@ -3,7 +3,7 @@
 
 use std::borrow::Cow;
 use std::sync::atomic::AtomicUsize;
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use super::odometry_error::OdometryResiduals;
 use super::{levels_from_extent, MapParams, ScanInput};
@@ -42,6 +42,10 @@ pub(super) struct State<'a> {
     /// `refine_map` prepared for ICP, made when a registration first needs it after the
     /// map changed.
     pub(super) refine_prepared: OnceLock<IcpTarget>,
+    /// The last `refine_prepared` since the map changed, to be brought up to the map when
+    /// a registration next needs it ([`IcpTarget::updated`]: the tiles the new scans
+    /// touched indexed again, not the whole map).
+    pub(super) refine_stale: Mutex<Option<IcpTarget>>,
     pub(super) poses: Vec<Option<Pose>>,
     /// Registrations run (counted by registrations that may run in parallel).
     pub(super) registrations: AtomicUsize,
@@ -92,6 +96,7 @@ impl<'a> State<'a> {
             refine_merge,
             refine_map: OnceLock::new(),
             refine_prepared: OnceLock::new(),
+            refine_stale: Mutex::new(None),
             registrations: AtomicUsize::new(0),
             map_box: None,
             residuals: None,
@@ -314,6 +319,10 @@ impl<'a> State<'a> {
         self.refine_merge = VoxelMerge::new(self.params.refine_map_voxel)?;
         self.refine_map = OnceLock::new();
         self.refine_prepared = OnceLock::new();
+        *self
+            .refine_stale
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner()) = None;
         self.map_box = None;
         if let Some(r) = &mut self.residuals {
             r.clear();
@@ -342,7 +351,12 @@ impl<'a> State<'a> {
         // ICP refines against the whole scans (the floor fixes the height a band leaves free).
         self.refine_merge.add(&self.scans[s].cloud, &pose)?;
         self.refine_map = OnceLock::new();
-        self.refine_prepared = OnceLock::new();
+        if let Some(prepared) = self.refine_prepared.take() {
+            *self
+                .refine_stale
+                .get_mut()
+                .unwrap_or_else(|e| e.into_inner()) = Some(prepared);
+        }
         self.poses[s] = Some(pose);
         if let (Some(r), Some((predicted, moves))) = (&mut self.residuals, prediction) {
             r.record(self.team.frame[s], &predicted, &pose, moves);
@@ -382,6 +396,7 @@ mod tests {
             refine_merge: VoxelMerge::new(0.05).unwrap(),
             refine_map: OnceLock::new(),
             refine_prepared: OnceLock::new(),
+            refine_stale: Mutex::new(None),
             poses: vec![None; scans.len()],
             registrations: AtomicUsize::new(0),
             map_box: None,
