@@ -192,8 +192,10 @@ impl IcpTarget {
     /// the same cloud with points appended and some moved (a
     /// [`crate::cloud::VoxelMerge`]'s after more scans were merged: voxels keep their
     /// order, centroids move). Only the tiles that gained or moved a point are indexed
-    /// again, and only the estimated normals whose neighbourhood reaches a moved or new
-    /// point are forgotten; the result answers as [`IcpTarget::of_map`] of `target` would
+    /// again, and a kept estimated normal is forgotten only when a moved or new point may
+    /// lie within its neighbourhood's reach (see `forget_normals_near`: a few that would
+    /// not have changed go too, and are computed again the same); the points are updated
+    /// in place. The result answers as [`IcpTarget::of_map`] of `target` would
     /// (up to which of two exactly equidistant points is taken). Anything else (another
     /// preparation, fewer points, a target not made by [`IcpTarget::of_map`], a block
     /// normal's voxel changed by a moved point) is prepared afresh.
@@ -418,11 +420,8 @@ impl Target {
             return Ok(false);
         };
         let old_len = self.points.len();
-        if cloud.len() < old_len {
-            return Ok(false);
-        }
-        let now: Vec<Point3<f64>> = cloud.points().iter().map(|p| p.cast::<f64>()).collect();
-        if !now.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+        let incoming = cloud.points();
+        if incoming.len() < old_len || !incoming.iter().all(|p| p.iter().all(|v| v.is_finite())) {
             return Ok(false);
         }
         let given = match (&self.normals, params.use_target_normals, cloud.normals()) {
@@ -431,65 +430,89 @@ impl Target {
             _ => return Ok(false),
         };
         let given_now = |i: usize| given.map(|ns| unit_or_zero(&ns[i].cast::<f64>()));
-        let moved: Vec<(u32, Point3<f64>)> = (0..old_len)
+        // What changed, checked before anything is changed (the points are updated in
+        // place: no second copy of a map's points).
+        let moved: Vec<u32> = (0..old_len)
             .filter(|&i| {
-                now[i] != self.points[i]
+                incoming[i].cast::<f64>() != self.points[i]
                     || matches!(&self.normals, Normals::Given(ns) if Some(ns[i]) != given_now(i))
             })
-            .map(|i| (i as u32, self.points[i]))
+            .map(|i| i as u32)
             .collect();
-        if moved.is_empty() && now.len() == old_len {
+        if moved.is_empty() && incoming.len() == old_len {
             return Ok(true);
         }
+        match &self.normals {
+            Normals::Estimated {
+                neighbourhood: Neighbourhood::Nearest(k),
+                ..
+            } => {
+                // Fewer points than `normal_k` (a map's first scans): every normal's
+                // neighbourhood changes size.
+                if k.get() < params.normal_k && incoming.len() > k.get() {
+                    return Ok(false);
+                }
+            }
+            Normals::Estimated {
+                neighbourhood: Neighbourhood::VoxelBlock { voxel, .. },
+                ..
+            } => {
+                // A point that moved into another voxel changes the block map's key.
+                let key = |p: &Point3<f64>| VoxelKey::from_point(p, *voxel);
+                if moved.iter().any(|&i| {
+                    key(&self.points[i as usize]) != key(&incoming[i as usize].cast::<f64>())
+                }) {
+                    return Ok(false);
+                }
+            }
+            Normals::Given(_) => {}
+        }
+        let moved: Vec<(u32, Point3<f64>)> = moved
+            .into_iter()
+            .map(|i| {
+                let p = &mut self.points[i as usize];
+                let was = *p;
+                *p = incoming[i as usize].cast::<f64>();
+                (i, was)
+            })
+            .collect();
+        self.points
+            .extend(incoming[old_len..].iter().map(|p| p.cast::<f64>()));
         match &mut self.normals {
             Normals::Given(ns) => {
                 for &(i, _) in &moved {
                     ns[i as usize] = given_now(i as usize).expect("given normals");
                 }
-                ns.extend((old_len..now.len()).map(|i| given_now(i).expect("given normals")));
+                ns.extend((old_len..incoming.len()).map(|i| given_now(i).expect("given normals")));
             }
             Normals::Estimated {
                 neighbourhood,
                 cache,
                 ..
             } => {
-                match neighbourhood {
-                    Neighbourhood::Nearest(k) => {
-                        // Fewer points than `normal_k` (a map's first scans): every
-                        // normal's neighbourhood changes size.
-                        if k.get() < params.normal_k && now.len() > k.get() {
-                            return Ok(false);
-                        }
-                    }
-                    Neighbourhood::VoxelBlock { voxel, cells } => {
-                        let key = |p: &Point3<f64>| VoxelKey::from_point(p, *voxel);
-                        if moved
-                            .iter()
-                            .any(|&(i, was)| key(&was) != key(&now[i as usize]))
-                        {
-                            return Ok(false);
-                        }
-                        for (i, p) in now.iter().enumerate().skip(old_len) {
-                            if let Some(k) = key(p) {
-                                cells.entry(k).or_insert(i as u32);
-                            }
+                if let Neighbourhood::VoxelBlock { voxel, cells } = neighbourhood {
+                    for (i, p) in self.points.iter().enumerate().skip(old_len) {
+                        if let Some(k) = VoxelKey::from_point(p, *voxel) {
+                            cells.entry(k).or_insert(i as u32);
                         }
                     }
                 }
                 // The positions a neighbourhood may have gained or lost.
-                let mut changed: Vec<[f64; 3]> = Vec::with_capacity(2 * moved.len());
+                let mut changed: Vec<[f64; 3]> =
+                    Vec::with_capacity(2 * moved.len() + self.points.len() - old_len);
                 for &(i, was) in &moved {
-                    let p = now[i as usize];
+                    let p = self.points[i as usize];
                     changed.push([was.x, was.y, was.z]);
                     changed.push([p.x, p.y, p.z]);
                     cache[i as usize].take();
                 }
-                changed.extend(now[old_len..].iter().map(|p| [p.x, p.y, p.z]));
-                cache.extend((old_len..now.len()).map(|_| OnceLock::new()));
+                changed.extend(self.points[old_len..].iter().map(|p| [p.x, p.y, p.z]));
+                cache.extend((old_len..self.points.len()).map(|_| OnceLock::new()));
+                // (The tiles still hold the old membership: the points that moved have
+                // no normal kept, the new ones none yet.)
                 forget_normals_near(cache, &self.points, tiles, &changed, neighbourhood)?;
             }
         }
-        self.points = now;
         tiles.update(&self.points, old_len, &moved)?;
         Ok(true)
     }
