@@ -360,8 +360,7 @@ pub fn consistency_seen(
     // The two sides are independent: counted side by side.
     let (source_side, target_side) = rayon::join(
         || -> Result<SideAgreement> {
-            let mut moved = OccupancyList::new(res)?;
-            moved.add_points(source, pose, 1);
+            let moved = OccupancyList::occupied_by(source, pose, res)?;
             Ok(count_side(
                 &surface(&moved),
                 &pose.transform_point(&source.origin()),
@@ -371,8 +370,7 @@ pub fn consistency_seen(
         || -> Result<Option<SideAgreement>> {
             match (target_points, seen_from_source) {
                 (Some(t), Some(seen)) if !t.is_empty() => {
-                    let mut back = OccupancyList::new(res)?;
-                    back.add_points(t, &pose.inverse(), 1);
+                    let back = OccupancyList::occupied_by(t, &pose.inverse(), res)?;
                     Ok(Some(count_side(&surface(&back), &source.origin(), seen)))
                 }
                 _ => Ok(None),

@@ -167,6 +167,40 @@ impl OccupancyList {
         skipped
     }
 
+    /// The voxels `cloud`'s points fall in once moved by `t_map_cloud`, each with a count
+    /// of 1 (how many points fell in it is not kept): the occupancy the agreement counts
+    /// read, where only whether a voxel holds a point matters. The voxel keys are computed
+    /// side by side and sorted, then stored once each in a table made large enough, instead
+    /// of a hash update per point in a table that grows (a map's side of a count is
+    /// hundreds of thousands of points). Points whose key does not fit are left out, as
+    /// [`OccupancyList::add_points`] skips them.
+    pub(crate) fn occupied_by(
+        cloud: &PointCloud,
+        t_map_cloud: &Pose,
+        resolution: f64,
+    ) -> Result<Self> {
+        use rayon::prelude::*;
+        check_resolution(resolution)?;
+        let mut keys: Vec<u64> = cloud
+            .points()
+            .par_iter()
+            .with_min_len(4096)
+            .filter_map(|p| {
+                pack_key(VoxelKey::from_point(
+                    &t_map_cloud.transform_point(&p.cast::<f64>()),
+                    resolution,
+                )?)
+            })
+            .collect();
+        keys.par_sort_unstable();
+        keys.dedup();
+        let mut list = OccupancyList::with_capacity(resolution, keys.len())?;
+        for k in keys {
+            list.add_packed(k, 1);
+        }
+        Ok(list)
+    }
+
     #[inline]
     pub(crate) fn pack(&self, p: &Point3<f64>) -> Option<u64> {
         pack_key(VoxelKey::from_point(p, self.resolution)?)
@@ -449,6 +483,33 @@ impl OccupancyList {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `occupied_by` holds exactly the voxels `add_points` fills (each once, count 1),
+    /// whatever the pose, and leaves out the points whose key does not fit, as it does.
+    #[test]
+    fn occupied_by_holds_the_voxels_add_points_fills() {
+        let mut rng = crate::sim::SimRng::new(9);
+        let mut points: Vec<Point3<f32>> = (0..30_000)
+            .map(|_| {
+                Point3::new(
+                    rng.range(-8.0, 8.0) as f32,
+                    rng.range(-8.0, 8.0) as f32,
+                    rng.range(0.0, 3.0) as f32,
+                )
+            })
+            .collect();
+        points.push(Point3::new(1e9, 0.0, 0.0));
+        let cloud = PointCloud::from_points(points);
+        let pose = Pose::from_xyz_ypr(1.3, -0.4, 0.2, 0.7, 0.05, -0.02);
+        let mut expected = OccupancyList::new(0.1).unwrap();
+        assert_eq!(expected.add_points(&cloud, &pose, 1), 1);
+        let got = OccupancyList::occupied_by(&cloud, &pose, 0.1).unwrap();
+        assert_eq!(got.len(), expected.len());
+        for (k, c) in got.iter() {
+            assert_eq!(c, 1);
+            assert!(expected.count(k) > 0, "{k:?}");
+        }
+    }
 
     fn sample() -> OccupancyList {
         let mut l = OccupancyList::new(0.1).unwrap();
