@@ -9,7 +9,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use rustc_hash::{FxHashMap, FxHashSet};
 
-use super::tiles::{tile_gap, Near, TileKey, Tiles};
+use super::tiles::{tile_gap, tree_nearest, Near, TileKey, Tiles};
 use super::{IcpParams, NormalNeighbourhood};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
@@ -394,21 +394,7 @@ impl Target {
         max_distance2: Option<f64>,
     ) -> Vec<Near> {
         match &self.index {
-            PointIndex::Whole(tree) => {
-                let at = [q.x, q.y, q.z];
-                let query = tree.query(&at).nearest_n::<SquaredEuclidean<f64>>(n);
-                let found = match max_distance2 {
-                    Some(m) => query.within(m).execute(),
-                    None => query.execute(),
-                };
-                found
-                    .iter()
-                    .map(|f| Near {
-                        item: f.item,
-                        distance: f.distance,
-                    })
-                    .collect()
-            }
+            PointIndex::Whole(tree) => tree_nearest(tree, q, n, max_distance2),
             PointIndex::Tiled(tiles) => tiles.nearest(q, n, max_distance2),
         }
     }

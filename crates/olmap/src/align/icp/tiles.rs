@@ -65,6 +65,29 @@ fn box_distance2(q: &Point3<f64>, key: TileKey) -> f64 {
     dx * dx + dy * dy
 }
 
+/// The `n` points of `tree` nearest `q` (items: the tree's own indices), only those within
+/// `max_distance2` (squared metres) when given.
+pub(super) fn tree_nearest(
+    tree: &ImmutableKdTree<f64, 3>,
+    q: &Point3<f64>,
+    n: NonZeroUsize,
+    max_distance2: Option<f64>,
+) -> Vec<Near> {
+    let at = [q.x, q.y, q.z];
+    let query = tree.query(&at).nearest_n::<SquaredEuclidean<f64>>(n);
+    let found = match max_distance2 {
+        Some(m) => query.within(m).execute(),
+        None => query.execute(),
+    };
+    found
+        .iter()
+        .map(|f| Near {
+            item: f.item,
+            distance: f.distance,
+        })
+        .collect()
+}
+
 /// One tile: the target points in it and their tree (`None` when it has none left).
 struct Tile {
     key: TileKey,
@@ -215,19 +238,13 @@ impl Tiles {
             let Some(tree) = &tile.tree else {
                 return;
             };
-            let at = [q.x, q.y, q.z];
-            let query = tree.query(&at).nearest_n::<SquaredEuclidean<f64>>(n);
-            let found = if b.is_finite() {
-                query.within(b).execute()
-            } else {
-                query.execute()
-            };
+            let found = tree_nearest(tree, q, n, b.is_finite().then_some(b));
             if found.is_empty() {
                 return;
             }
-            best.extend(found.iter().map(|f| Near {
+            best.extend(found.into_iter().map(|f| Near {
                 item: tile.members[f.item as usize],
-                distance: f.distance,
+                ..f
             }));
             best.sort_unstable_by(|a, b| {
                 a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item))
