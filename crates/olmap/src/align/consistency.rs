@@ -86,35 +86,37 @@ fn surface(list: &OccupancyList) -> OccupancyList {
 
 /// [`surface`], looking the neighbours up in `occupied` (`list`'s own voxels).
 fn surface_with(list: &OccupancyList, occupied: Occupied<'_>) -> OccupancyList {
-    list.par_filtered(|k, _| {
-        neighbourhood(k)
-            .filter(|n| *n != k && occupied.at(*n))
-            .nth(MIN_SURFACE_NEIGHBOURS - 1)
-            .is_some()
-    })
+    list.par_filtered(|k, _| is_surface(occupied, k))
+}
+
+/// Whether voxel `k` has at least [`MIN_SURFACE_NEIGHBOURS`] occupied neighbours in
+/// `occupied` (whether `k` itself is occupied is not asked).
+#[inline]
+fn is_surface(occupied: Occupied<'_>, k: VoxelKey) -> bool {
+    neighbourhood(k)
+        .filter(|n| *n != k && occupied.at(*n))
+        .nth(MIN_SURFACE_NEIGHBOURS - 1)
+        .is_some()
 }
 
 /// Upright voxels (of one side) the other scan must observe for [`SideAgreement::agreement`]
 /// to be taken over upright structure alone.
 pub const MIN_UPRIGHT_SEEN: u64 = 100;
 
-/// One side's count: the voxels of one scan against the other's occupancy and free space.
+/// One side's count: the surface voxels of one scan against the other's occupancy and
+/// free space. Only voxels the other scan observed are counted: a surface voxel it never
+/// observed says nothing, and is not looked at (its surface test is skipped).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SideAgreement {
-    /// Surface voxels of this scan.
-    pub voxels: u64,
-    /// Voxels with an occupied voxel of the other scan within one cell.
+    /// Surface voxels with an occupied voxel of the other scan within one cell.
     pub supported: u64,
-    /// Voxels the other scan saw through (free, and not supported), counted only in
-    /// patches: with at least [`MIN_CONTRADICTED_NEIGHBOURS`] such neighbours.
+    /// Surface voxels the other scan saw through (free, and not supported), counted only
+    /// in patches: with at least [`MIN_CONTRADICTED_NEIGHBOURS`] such neighbours.
     pub contradicted: u64,
-    /// Of [`SideAgreement::voxels`], those on upright structure (walls, furniture sides:
-    /// an occupied voxel two layers above or below within one cell sideways), not on a
-    /// floor or ceiling.
-    pub upright: u64,
-    /// Upright voxels supported.
+    /// Supported voxels on upright structure (walls, furniture sides: a surface voxel two
+    /// layers above or below within one cell sideways), not on a floor or ceiling.
     pub upright_supported: u64,
-    /// Upright voxels contradicted.
+    /// Contradicted voxels on upright structure.
     pub upright_contradicted: u64,
 }
 
@@ -136,15 +138,6 @@ impl SideAgreement {
             1.0
         } else {
             s as f64 / (s + c) as f64
-        }
-    }
-
-    /// The share of this scan's voxels the other scan observed (supported or contradicted).
-    pub fn observed_fraction(&self) -> f64 {
-        if self.voxels == 0 {
-            0.0
-        } else {
-            (self.supported + self.contradicted) as f64 / self.voxels as f64
         }
     }
 }
@@ -170,8 +163,12 @@ impl Consistency {
     }
 }
 
-/// Counts one scan's surface voxels (`mine`, already in the other's frame) against the other's
-/// occupancy and free space (`other`, at the same resolution).
+/// Counts one scan's surface voxels against the other's occupancy and free space:
+/// `mine` is all the scan's occupied voxels (already in the other's frame, at the other's
+/// resolution); a voxel is tested for being surface only when the other scan observed it
+/// (an occupied cell within one cell at its level, or deep free space there), since no
+/// other voxel changes a count. In a map cropped around a scan most voxels lie where the
+/// scan never looked.
 fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) -> SideAgreement {
     let res = other.resolution();
     let levels = other.pyramid().levels();
@@ -193,13 +190,16 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
                 Occupied::Hash(other.pyramid().level(level)),
                 Occupied::Dense,
             );
-            let up = is_upright(own, k);
-            side.upright += u64::from(up);
             let near = neighbourhood(kl).any(|n| occ.at(n));
+            let free = !near && other.free[level].as_ref().is_some_and(|g| deep_free(g, kl));
+            if !(near || free) || !is_surface(own, k) {
+                continue;
+            }
+            let up = is_upright(own, k);
             if near {
                 side.supported += 1;
                 side.upright_supported += u64::from(up);
-            } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
+            } else {
                 through.push((k, up));
             }
         }
@@ -207,14 +207,10 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
     };
     let parts: Vec<(SideAgreement, Vec<(VoxelKey, bool)>)> =
         keys.par_chunks(COUNT_CHUNK).map(count_chunk).collect();
-    let mut side = SideAgreement {
-        voxels: mine.len() as u64,
-        ..Default::default()
-    };
+    let mut side = SideAgreement::default();
     let mut seen_through = std::collections::HashMap::new();
     for (part, through) in parts {
         side.supported += part.supported;
-        side.upright += part.upright;
         side.upright_supported += part.upright_supported;
         seen_through.extend(through);
     }
@@ -255,11 +251,17 @@ const COUNT_CHUNK: usize = 4096;
 /// stray returns and not counted ([`SideAgreement::contradicted`]).
 pub const MIN_CONTRADICTED_NEIGHBOURS: usize = 2;
 
-/// Whether `k` lies on upright structure: an occupied voxel two layers above or below it,
-/// within one cell sideways (a floor or ceiling one or two layers thick has none).
+/// Whether `k` lies on upright structure: a surface voxel ([`is_surface`]) two layers
+/// above or below it, within one cell sideways (a floor or ceiling one or two layers thick
+/// has none). `list` holds all the scan's occupied voxels.
 fn is_upright(list: Occupied<'_>, k: VoxelKey) -> bool {
     [-2, 2].iter().any(|&dz| {
-        (-1..=1).any(|dx| (-1..=1).any(|dy| list.at(VoxelKey::new(k.x + dx, k.y + dy, k.z + dz))))
+        (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| {
+                let n = VoxelKey::new(k.x + dx, k.y + dy, k.z + dz);
+                list.at(n) && is_surface(list, n)
+            })
+        })
     })
 }
 
@@ -362,7 +364,7 @@ pub fn consistency_seen(
         || -> Result<SideAgreement> {
             let moved = OccupancyList::occupied_by(source, pose, res)?;
             Ok(count_side(
-                &surface(&moved),
+                &moved,
                 &pose.transform_point(&source.origin()),
                 target,
             ))
@@ -371,7 +373,7 @@ pub fn consistency_seen(
             match (target_points, seen_from_source) {
                 (Some(t), Some(seen)) if !t.is_empty() => {
                     let back = OccupancyList::occupied_by(t, &pose.inverse(), res)?;
-                    Ok(Some(count_side(&surface(&back), &source.origin(), seen)))
+                    Ok(Some(count_side(&back, &source.origin(), seen)))
                 }
                 _ => Ok(None),
             }
@@ -616,5 +618,112 @@ mod tests {
             contradicted > 0,
             "the wrong poses must contradict somewhere"
         );
+    }
+
+    /// The count as first written, for [`count_side`] to answer as: the surface of the
+    /// whole list first, then every surface voxel counted, observed or not; also returns
+    /// how many surface voxels there were and how many of them the other observed.
+    fn count_every_surface_voxel(
+        mine: &OccupancyList,
+        origin: &Point3<f64>,
+        other: &SearchTarget,
+    ) -> (SideAgreement, usize, u64) {
+        let (res, levels) = (other.resolution(), other.pyramid().levels());
+        let surf = surface(mine);
+        let own = Occupied::Hash(&surf);
+        let mut side = SideAgreement::default();
+        let mut through = std::collections::HashMap::new();
+        let mut observed = 0;
+        for (k, _) in surf.iter() {
+            let level = level_at((surf.center(k) - origin).norm(), res, levels);
+            let f = 1i32 << level;
+            let kl = VoxelKey::new(k.x.div_euclid(f), k.y.div_euclid(f), k.z.div_euclid(f));
+            let occ = Occupied::Hash(other.pyramid().level(level));
+            // Upright: a surface voxel two layers above or below, one cell sideways.
+            let up = [-2, 2].iter().any(|&dz| {
+                (-1..=1).any(|dx| {
+                    (-1..=1).any(|dy| own.at(VoxelKey::new(k.x + dx, k.y + dy, k.z + dz)))
+                })
+            });
+            if neighbourhood(kl).any(|n| occ.at(n)) {
+                side.supported += 1;
+                side.upright_supported += u64::from(up);
+                observed += 1;
+            } else if other.free[level].as_ref().is_some_and(|g| deep_free(g, kl)) {
+                through.insert(k, up);
+                observed += 1;
+            }
+        }
+        for (k, up) in &through {
+            let n = neighbourhood(*k)
+                .filter(|n| n != k && through.contains_key(n))
+                .count();
+            if n >= MIN_CONTRADICTED_NEIGHBOURS {
+                side.contradicted += 1;
+                side.upright_contradicted += u64::from(*up);
+            }
+        }
+        (side, surf.len(), observed)
+    }
+
+    /// Testing only the voxels the other scan observed for being surface changes no count:
+    /// both sides, the right pose and wrong ones, against every surface voxel counted,
+    /// while many surface voxels were never observed.
+    #[test]
+    fn counting_only_observed_voxels_counts_as_every_surface_voxel() {
+        // Specks 0.6 m above the floor, 1.2 m apart: occupied, never surface, two layers
+        // above floor voxels that are not upright.
+        let specks = |cloud: PointCloud| {
+            let origin = cloud.origin();
+            let mut points = cloud.points().to_vec();
+            for i in -20..20 {
+                for j in -14..14 {
+                    points.push(Point3::new(i as f32 * 1.2 + 0.1, j as f32 * 1.2 + 0.1, 0.6));
+                }
+            }
+            PointCloud::from_points(points).with_origin(origin)
+        };
+        let target_cloud = specks(hall(
+            &[(3.0, 2.0), (-8.0, 5.0), (12.0, -6.0)],
+            Point3::new(0.0, 0.0, 1.5),
+        ));
+        let source_cloud = specks(hall(
+            &[(3.0, 2.0), (-4.0, -3.0)],
+            Point3::new(1.0, 0.8, 1.5),
+        ));
+        let (res, levels) = (0.25, 4);
+        let target = SearchTarget::from_cloud(&target_cloud, res, levels).unwrap();
+        let seen = source_view(&source_cloud, &target).unwrap();
+        let (mut unobserved, mut contradicted) = (0u64, 0);
+        for pose in [
+            Pose::identity(),
+            Pose::from_xyz_ypr(2.0, 1.0, 0.1, 0.3, 0.01, -0.02),
+            Pose::from_xyz_ypr(20.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            Pose::from_xyz_ypr(0.0, 28.0, 0.0, 0.0, 0.0, 0.0),
+        ] {
+            let c = consistency_seen(
+                &source_cloud,
+                Some(&seen),
+                &target,
+                Some(&target_cloud),
+                &pose,
+            )
+            .unwrap();
+            let moved = OccupancyList::occupied_by(&source_cloud, &pose, res).unwrap();
+            let origin = pose.transform_point(&source_cloud.origin());
+            let (source, n, seen_n) = count_every_surface_voxel(&moved, &origin, &target);
+            assert_eq!(c.source, source, "source side, pose {pose:?}");
+            let back = OccupancyList::occupied_by(&target_cloud, &pose.inverse(), res).unwrap();
+            let (other, m, seen_m) =
+                count_every_surface_voxel(&back, &source_cloud.origin(), &seen);
+            assert_eq!(c.target, Some(other), "target side, pose {pose:?}");
+            unobserved += (n + m) as u64 - seen_n - seen_m;
+            contradicted += source.contradicted + other.contradicted;
+        }
+        assert!(
+            contradicted > 0,
+            "the wrong poses must contradict somewhere"
+        );
+        assert!(unobserved > 0, "some surface voxels were never observed");
     }
 }

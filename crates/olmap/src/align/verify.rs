@@ -895,7 +895,6 @@ mod tests {
     fn hypothesis(start: Candidate, end: Pose, supported: u64, contradicted: u64) -> Hypothesis {
         let consistency = Consistency {
             source: SideAgreement {
-                voxels: supported + contradicted,
                 supported,
                 contradicted,
                 ..Default::default()
