@@ -54,7 +54,7 @@ fn neighbourhood(k: VoxelKey) -> impl Iterator<Item = VoxelKey> {
 
 /// The largest key box, in cells, of a scan's own dense grid in [`surface`] and
 /// [`count_side`] (2^27 bits = 16 MiB; larger lists answer from the hash).
-const MAX_LOCAL_GRID_CELLS: u64 = 1 << 27;
+const MAX_LOCAL_GRID_CELLS: u64 = 1 << 30;
 
 /// Lookups of occupied voxels: one bit of a dense grid when there is one, else the list's
 /// hash (the same answers; the grid is several times faster for 27-cell neighbourhoods).
@@ -71,6 +71,31 @@ impl Occupied<'_> {
         match self {
             Occupied::Dense(g) => g.contains(k.x as i64, k.y as i64, k.z as i64),
             Occupied::Hash(l) => l.count(k) > 0,
+        }
+    }
+
+    /// Whether a voxel of the 3 x 3 x 3 block centred on `k` (`k` included) is occupied.
+    #[inline]
+    fn any_near(&self, k: VoxelKey) -> bool {
+        match self {
+            Occupied::Dense(g) => g.block_count(k.x as i64, k.y as i64, k.z as i64) > 0,
+            Occupied::Hash(_) => neighbourhood(k).any(|n| self.at(n)),
+        }
+    }
+
+    /// How many of the 26 neighbours of `k` are occupied, counting up to `enough` (a
+    /// dense grid counts them all; the hash stops at `enough`).
+    #[inline]
+    fn neighbours(&self, k: VoxelKey, enough: usize) -> usize {
+        match self {
+            Occupied::Dense(g) => {
+                let (x, y, z) = (k.x as i64, k.y as i64, k.z as i64);
+                (g.block_count(x, y, z) - u32::from(g.contains(x, y, z))) as usize
+            }
+            Occupied::Hash(_) => neighbourhood(k)
+                .filter(|n| *n != k && self.at(*n))
+                .take(enough)
+                .count(),
         }
     }
 }
@@ -93,10 +118,7 @@ fn surface_with(list: &OccupancyList, occupied: Occupied<'_>) -> OccupancyList {
 /// `occupied` (whether `k` itself is occupied is not asked).
 #[inline]
 fn is_surface(occupied: Occupied<'_>, k: VoxelKey) -> bool {
-    neighbourhood(k)
-        .filter(|n| *n != k && occupied.at(*n))
-        .nth(MIN_SURFACE_NEIGHBOURS - 1)
-        .is_some()
+    occupied.neighbours(k, MIN_SURFACE_NEIGHBOURS) >= MIN_SURFACE_NEIGHBOURS
 }
 
 /// Upright voxels (of one side) the other scan must observe for [`SideAgreement::agreement`]
@@ -190,7 +212,7 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
                 Occupied::Hash(other.pyramid().level(level)),
                 Occupied::Dense,
             );
-            let near = neighbourhood(kl).any(|n| occ.at(n));
+            let near = occ.any_near(kl);
             let free = !near && other.free[level].as_ref().is_some_and(|g| deep_free(g, kl));
             if !(near || free) || !is_surface(own, k) {
                 continue;
@@ -436,7 +458,7 @@ impl QuickFit {
             let Some(k) = VoxelKey::from_point(&pose.transform_point(c), res) else {
                 continue;
             };
-            if neighbourhood(k).any(|n| occ.at(n)) {
+            if occ.any_near(k) {
                 supported += 1;
             } else if free.is_some_and(|g| deep_free(g, k)) {
                 contradicted += 1;
@@ -489,6 +511,13 @@ mod tests {
                     let k = VoxelKey::new(x as i32, y as i32, z as i32);
                     assert_eq!(dense.at(k), hash.at(k), "{k:?}");
                     assert_eq!(is_upright(dense, k), is_upright(hash, k), "{k:?}");
+                    assert_eq!(dense.any_near(k), hash.any_near(k), "{k:?}");
+                    assert_eq!(is_surface(dense, k), is_surface(hash, k), "{k:?}");
+                    assert_eq!(
+                        dense.neighbours(k, 26),
+                        neighbourhood(k).filter(|n| *n != k && hash.at(*n)).count(),
+                        "{k:?}"
+                    );
                     checked += 1;
                 }
             }

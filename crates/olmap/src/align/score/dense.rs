@@ -177,6 +177,36 @@ impl DenseGrid {
             .is_some_and(|i| self.bits[(i / 64) as usize] >> (i % 64) & 1 == 1)
     }
 
+    /// How many cells of the 3 x 3 x 3 block centred on `(x, y, z)` are occupied (the
+    /// centre included; cells outside the box count as clear). Nine reads of three
+    /// neighbouring bits, one per `(x, y)` column, instead of 27 lookups.
+    #[inline]
+    pub fn block_count(&self, x: i64, y: i64, z: i64) -> u32 {
+        let dz = (z - self.min[2]) as i128;
+        let (z0, z1) = ((dz - 1).max(0), (dz + 1).min(self.dims[2] as i128 - 1));
+        if z1 < z0 {
+            return 0;
+        }
+        let n = (z1 - z0 + 1) as u32;
+        let z0 = z0 as u64;
+        let mut count = 0;
+        for cx in x - 1..=x + 1 {
+            let ix = (cx - self.min[0]) as u64;
+            if ix >= self.dims[0] {
+                continue;
+            }
+            for cy in y - 1..=y + 1 {
+                let iy = (cy - self.min[1]) as u64;
+                if iy >= self.dims[1] {
+                    continue;
+                }
+                let at = (ix * self.dims[1] + iy) * self.dims[2] + z0;
+                count += read_bits(&self.bits, at, n).count_ones();
+            }
+        }
+        count
+    }
+
     /// Sets cells from several threads at once: `visit` runs for every item of `items` in
     /// parallel and marks cells through the [`SharedCells`] it is given.
     pub fn par_set<T: Sync>(&mut self, items: &[T], visit: impl Fn(&[T], &SharedCells) + Sync) {
