@@ -1,21 +1,14 @@
 //! What the benchmark and the live demo share: the demo's simulated lab team and a free
 //! loopback port.
 
-use olmap::sim::{simulate, OdometryNoise, SimConfig, SimDataset, WorldKind};
+use olmap::sim::{simulate, SimConfig, SimDataset};
 
 use crate::error::{NetError, Result};
 
 /// The demo's team: the lab world, degraded odometry (thesis §6.5), `robots` × `stops`.
 pub fn demo_lab(seed: u64, robots: usize, stops: usize) -> Result<SimDataset> {
     Ok(simulate(
-        &SimConfig {
-            world: WorldKind::Lab,
-            seed,
-            robots,
-            stops,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        },
+        &SimConfig::demo_lab(seed, robots, stops),
         |_, _| {},
     )?)
 }

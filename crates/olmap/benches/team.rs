@@ -12,7 +12,7 @@ use divan::Bencher;
 use olmap::align::{global_search, Locus, Region, SearchParams, SearchTarget};
 use olmap::cloud::PointCloud;
 use olmap::geometry::{Pose, PoseError};
-use olmap::sim::{simulate, OdometryNoise, RobotModel, SimConfig, SimDataset, WorldKind};
+use olmap::sim::{simulate, RobotModel, SimConfig, SimDataset};
 use olmap::team::{map_solo, map_team, TeamParams};
 
 fn main() {
@@ -21,17 +21,7 @@ fn main() {
 
 fn data() -> &'static SimDataset {
     static D: OnceLock<SimDataset> = OnceLock::new();
-    D.get_or_init(|| {
-        let config = SimConfig {
-            world: WorldKind::Lab,
-            seed: 2,
-            robots: 3,
-            stops: 4,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        };
-        simulate(&config, |_, _| {}).unwrap()
-    })
+    D.get_or_init(|| simulate(&SimConfig::demo_lab(2, 3, 4), |_, _| {}).unwrap())
 }
 
 /// (target = the observer's scan, source = the seen robot's scan in its 0.1-2.8 m band,
@@ -104,15 +94,7 @@ fn map_three_robots(bencher: Bencher, how: &str) {
 fn demo_team() -> &'static (olmap::team::ScanStore, olmap::geometry::PoseList) {
     static D: OnceLock<(olmap::team::ScanStore, olmap::geometry::PoseList)> = OnceLock::new();
     D.get_or_init(|| {
-        let config = SimConfig {
-            world: WorldKind::Lab,
-            seed: 1,
-            robots: 4,
-            stops: 10,
-            odometry: OdometryNoise::degraded(),
-            ..Default::default()
-        };
-        let data = simulate(&config, |_, _| {}).unwrap();
+        let data = simulate(&SimConfig::demo_lab(1, 4, 10), |_, _| {}).unwrap();
         let store = data.to_store().unwrap();
         let truth = data.truth_list(&store);
         (store, truth)

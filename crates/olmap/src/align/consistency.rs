@@ -53,7 +53,9 @@ fn neighbourhood(k: VoxelKey) -> impl Iterator<Item = VoxelKey> {
 }
 
 /// The largest key box, in cells, of a scan's own dense grid in [`surface`] and
-/// [`count_side`] (2^27 bits = 16 MiB; larger lists answer from the hash).
+/// [`count_side`] (2^30 bits = 128 MiB, held while one count runs, its pages touched only
+/// where voxels are; larger lists answer from the hash, several times slower). A 0.05 m
+/// map cropped around a warehouse lidar scan spans 92 x 94 x 10 m: 7.2 x 10^8 cells.
 const MAX_LOCAL_GRID_CELLS: u64 = 1 << 30;
 
 /// Lookups of occupied voxels: one bit of a dense grid when there is one, else the list's

@@ -208,8 +208,8 @@ impl SearchTarget {
                 }
             }
         }
-        self.grids = empty_grids(self.pyramid.levels());
-        for level in 0..self.pyramid.levels() {
+        self.grids = empty_grids(levels);
+        for level in 0..levels {
             let grid = self.free[level].take();
             let level_list = self.pyramid.level(level);
             self.free[level] = add_free_space(grid, cloud, pose, level_list, read_within(level));

@@ -91,6 +91,22 @@ fn check_old_dataset(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+impl SimConfig {
+    /// The demo's team: the lab world, the thesis' degraded odometry (§6.5), `robots`
+    /// robots of `stops` stops each, drawn from `seed` (the demo itself: seed 1, 4 x 10).
+    /// Benchmarks and the live demo simulate the same team from it.
+    pub fn demo_lab(seed: u64, robots: usize, stops: usize) -> Self {
+        SimConfig {
+            world: WorldKind::Lab,
+            seed,
+            robots,
+            stops,
+            odometry: OdometryNoise::degraded(),
+            ..Default::default()
+        }
+    }
+}
+
 /// Runs the demo ([`Stage::Simulate`], then the team pipeline's stages). Every output is
 /// checked before simulating, and the dataset and the team run's files are written as one
 /// [`OutputSet`]: a failed or killed demo leaves the older demo's outputs (or nothing),
@@ -107,14 +123,7 @@ pub fn run_demo(config: &DemoConfig, progress: Progress<'_>) -> Result<DemoRun> 
     let dataset_dir = config.out.join("dataset");
     check_old_dataset(&dataset_dir)?;
     set.dir(&dataset_dir, "dataset folder")?;
-    let sim = SimConfig {
-        world: WorldKind::Lab,
-        seed: config.seed,
-        robots: config.robots,
-        stops: config.scans_per_robot,
-        odometry: OdometryNoise::degraded(),
-        ..Default::default()
-    };
+    let sim = SimConfig::demo_lab(config.seed, config.robots, config.scans_per_robot);
     let data = simulate(&sim, |done, total| progress(Stage::Simulate, done, total))?;
     write_dataset_into(&set.path(&dataset_dir)?, &data)?;
     let simulate_seconds = start.elapsed().as_secs_f64();
