@@ -53,9 +53,10 @@ fn neighbourhood(k: VoxelKey) -> impl Iterator<Item = VoxelKey> {
 }
 
 /// The largest key box, in cells, of a scan's own dense grid in [`surface`] and
-/// [`count_side`] (2^30 bits = 128 MiB, held while one count runs, its pages touched only
-/// where voxels are; larger lists answer from the hash, several times slower). A 0.05 m
-/// map cropped around a warehouse lidar scan spans 92 x 94 x 10 m: 7.2 x 10^8 cells.
+/// [`count_side`] (2^30 bits = 128 MiB, held while a count runs, one for each of its two
+/// sides at once, its pages touched only where voxels are; larger lists answer from the
+/// hash, several times slower). A 0.05 m map cropped around a warehouse lidar scan spans
+/// 1844 x 1883 x 208 cells (92 x 94 x 10.4 m): 7.2 x 10^8.
 const MAX_LOCAL_GRID_CELLS: u64 = 1 << 30;
 
 /// Lookups of occupied voxels: one bit of a dense grid when there is one, else the list's
@@ -652,15 +653,17 @@ mod tests {
     }
 
     /// The count as first written, for [`count_side`] to answer as: the surface of the
-    /// whole list first, then every surface voxel counted, observed or not; also returns
-    /// how many surface voxels there were and how many of them the other observed.
+    /// whole list first (its neighbours looked up one by one in the hash, not in blocks of
+    /// a dense grid), then every surface voxel counted, observed or not, every lookup in a
+    /// hash; also returns how many surface voxels there were and how many of them the
+    /// other observed.
     fn count_every_surface_voxel(
         mine: &OccupancyList,
         origin: &Point3<f64>,
         other: &SearchTarget,
     ) -> (SideAgreement, usize, u64) {
         let (res, levels) = (other.resolution(), other.pyramid().levels());
-        let surf = surface(mine);
+        let surf = surface_with(mine, Occupied::Hash(mine));
         let own = Occupied::Hash(&surf);
         let mut side = SideAgreement::default();
         let mut through = std::collections::HashMap::new();
@@ -702,8 +705,8 @@ mod tests {
     /// while many surface voxels were never observed.
     #[test]
     fn counting_only_observed_voxels_counts_as_every_surface_voxel() {
-        // Specks 0.6 m above the floor, 1.2 m apart: occupied, never surface, two layers
-        // above floor voxels that are not upright.
+        // Specks 0.6 m above the floor, 1.2 m apart: occupied, and (but for the few next
+        // to a pillar) not surface, two layers above floor voxels that are not upright.
         let specks = |cloud: PointCloud| {
             let origin = cloud.origin();
             let mut points = cloud.points().to_vec();
