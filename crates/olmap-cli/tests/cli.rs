@@ -620,6 +620,38 @@ fn align_json_and_localize_in_a_map() {
     ]));
     let tx = v["T_target_source"][0][3].as_f64().unwrap();
     assert!((tx - 1.568).abs() < 0.05, "{tx}");
+    // Several scans in the map prepared once (`--also`): each placed as alone, and scan002
+    // (data README §1.6: 3.378 m ahead of scan000; 5 cm, §1.7) placed too.
+    let s2 = d.join("3dtk_dat/scan002.3d");
+    let many = json(&olmap(&[
+        "localize",
+        "--json",
+        "--3dtk-valid",
+        s1.to_str().unwrap(),
+        map.to_str().unwrap(),
+        "--also",
+        s2.to_str().unwrap(),
+    ]));
+    assert!(many["prepare_seconds"].as_f64().unwrap() > 0.0);
+    let results = many["results"].as_array().unwrap();
+    assert_eq!(results.len(), 2);
+    assert_eq!(results[0]["source"], s1.to_str().unwrap());
+    assert_eq!(results[0]["trusted"], v["trusted"]);
+    assert_eq!(results[0]["T_target_source"], v["T_target_source"]);
+    let tx = results[1]["T_target_source"][0][3].as_f64().unwrap();
+    assert!((tx - 3.378).abs() < 0.05, "{tx}");
+    assert_eq!(results[1]["trusted"], true);
+    // --also places scans in a map, not in another scan.
+    let out = olmap(&[
+        "align",
+        s1.to_str().unwrap(),
+        s0.to_str().unwrap(),
+        "--also",
+        s2.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--also") && err.contains("not a map"), "{err}");
 }
 
 #[test]

@@ -2,12 +2,15 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use olmap::align::icp::IcpParams;
 use olmap::align::verify::Origin;
-use olmap::align::{self, Region, RegisterParams, Registration, SearchMode, SearchParams};
+use olmap::align::{
+    self, Localizer, Region, RegisterParams, Registration, SearchMode, SearchParams,
+};
 use olmap::cloud::PointCloud;
 use olmap::geometry::Pose;
 use olmap::io::{self, ReadOptions};
@@ -74,6 +77,13 @@ pub struct AlignArgs {
     /// every pose scores alike (a floor against a floor). Default: the library's.
     #[arg(long, value_name = "N")]
     pub exact_max_work: Option<f64>,
+    /// Further scans to place in the same map, after SOURCE (`localize` only): the map is
+    /// prepared once (its search pyramid, its voxel centres indexed for ICP) and each scan
+    /// pays only for its own search, refinement and checks; each `seconds` then counts
+    /// that scan alone. Text prints each result under its scan's name; --json prints one
+    /// object, `{"prepare_seconds": .., "results": [..]}`, a report per scan in order.
+    #[arg(long, value_name = "SCAN", num_args = 1..)]
+    pub also: Vec<PathBuf>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -153,9 +163,6 @@ fn params(a: &AlignArgs) -> anyhow::Result<RegisterParams> {
 }
 
 fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
-    let t = r.pose.translation();
-    let (y, p, ro) = r.pose.yaw_pitch_roll();
-    let s = &r.search;
     if a.json {
         let v = align::AlignmentReport::new(
             r,
@@ -165,6 +172,13 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
+    print_text(r, a)
+}
+
+fn print_text(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
+    let t = r.pose.translation();
+    let (y, p, ro) = r.pose.yaw_pitch_roll();
+    let s = &r.search;
     println!("T_target_source:");
     for row in align::matrix_rows(&r.pose) {
         println!(
@@ -258,8 +272,18 @@ fn print(r: &Registration, a: &AlignArgs) -> anyhow::Result<()> {
 pub fn run(a: &AlignArgs) -> anyhow::Result<ExitCode> {
     set_threads(a.threads.threads)?;
     let p = params(a)?;
+    let is_map = MapFormat::from_path(&a.target).is_some();
+    if !a.also.is_empty() {
+        if !is_map {
+            bail!(
+                "--also places further scans in a map: {} is not a map (.olm, .bt)",
+                a.target.display()
+            );
+        }
+        return localize_many(a, &p);
+    }
     let source = read_cloud(&a.source, a.threedtk_valid)?;
-    let r = if MapFormat::from_path(&a.target).is_some() {
+    let r = if is_map {
         let map = occupancy::read_map(&a.target)?.map;
         align::localize(&source, &map, &p)?
     } else {
@@ -267,5 +291,49 @@ pub fn run(a: &AlignArgs) -> anyhow::Result<ExitCode> {
         align::register(&source, &target, &p)?
     };
     print(&r, a)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `olmap localize SOURCE MAP --also SCAN...`: every scan read first (a bad file fails
+/// before any work), the map prepared once, the scans placed in order.
+fn localize_many(a: &AlignArgs, p: &RegisterParams) -> anyhow::Result<ExitCode> {
+    let paths: Vec<&PathBuf> = std::iter::once(&a.source).chain(&a.also).collect();
+    let scans = paths
+        .iter()
+        .map(|path| read_cloud(path, a.threedtk_valid))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let map = occupancy::read_map(&a.target)?.map;
+    let started = Instant::now();
+    let localizer = Localizer::new(map, p)?;
+    let prepare_seconds = started.elapsed().as_secs_f64();
+    let target = a.target.display().to_string();
+    let mut reports = Vec::new();
+    if !a.json {
+        println!(
+            "prepared {} ({} voxels) in {prepare_seconds:.3} s",
+            target,
+            localizer.len()
+        );
+    }
+    for (path, scan) in paths.iter().zip(&scans) {
+        let r = localizer.localize(scan, p)?;
+        if a.json {
+            reports.push(align::AlignmentReport::new(
+                &r,
+                &path.display().to_string(),
+                &target,
+            ));
+        } else {
+            println!("\n{}", path.display());
+            print_text(&r, a)?;
+        }
+    }
+    if a.json {
+        let v = serde_json::json!({
+            "prepare_seconds": prepare_seconds,
+            "results": reports,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -7,6 +7,7 @@ mod evaluate;
 mod exhaustive;
 pub mod icp;
 mod lattice;
+mod localize;
 mod multires;
 mod params;
 mod register;
@@ -26,10 +27,11 @@ pub use consistency::{
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
+pub use localize::{localize, Localizer};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
-    localize, register, register_to, register_to_prepared, register_to_prepared_or_widen,
-    register_to_split, OnWindowEdge, RegisterParams, Registration, REFINE_REACH_CELLS,
+    register, register_to, register_to_prepared, register_to_prepared_or_widen, register_to_split,
+    OnWindowEdge, RegisterParams, Registration, REFINE_REACH_CELLS,
 };
 pub use report::{
     matrix_rows, AgreementJson, AlignmentReport, DegeneracyJson, HypothesisJson, LevelJson,

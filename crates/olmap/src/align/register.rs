@@ -12,14 +12,15 @@ use super::verdict::{
     agreement_doubts, look_alike_doubts, refinement_doubts, search_doubts, uniqueness_doubts,
     upright_look_doubts, window_doubts, TrustThresholds,
 };
-use super::verify::{starts, upright_starts, verify, GlobalChecks, RefineAgainst, Verification};
+use super::verify::{
+    starts, upright_starts, verify, GlobalChecks, MapSurfaces, RefineAgainst, Verification,
+};
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::geometry::Pose;
-use crate::occupancy::OccupancyList;
 
-/// Parameters of [`register`] and [`localize`]. The default refines with ICP.
+/// Parameters of [`register`] and [`super::localize`]. The default refines with ICP.
 #[derive(Debug, Clone)]
 pub struct RegisterParams {
     /// The global search.
@@ -60,8 +61,8 @@ pub struct Registration {
     /// The trust tests that failed, in words.
     pub doubts: Vec<String>,
     /// Wall time of the whole registration, seconds: from the call to its answer, the
-    /// search target's preparation included for [`register`] and [`localize`] (not for the
-    /// functions given a prepared target).
+    /// search target's preparation included for [`register`] and [`super::localize`] (not
+    /// for the functions given a prepared target, nor for [`super::Localizer::localize`]).
     pub seconds: f64,
 }
 
@@ -76,7 +77,7 @@ pub const REFINE_REACH_CELLS: f64 = 5.0;
 
 /// The refinement parameters after a search at `resolution`: the starting distance capped
 /// at [`REFINE_REACH_CELLS`] cells.
-fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
+pub(super) fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
     let mut p = p.clone();
     p.max_distance_start = p
         .max_distance_start
@@ -86,15 +87,18 @@ fn refinement_after_search(p: &IcpParams, resolution: f64) -> IcpParams {
 
 /// What the refinement and the agreement check work against: the prepared target (its
 /// finest level and free space) and its points (cropped around each hypothesis).
-struct Against<'a> {
-    target: &'a SearchTarget,
+pub(super) struct Against<'a> {
+    pub(super) target: &'a SearchTarget,
     /// Made only when a hypothesis is refined (a map's voxel centres cost a pass).
-    points: &'a dyn Fn() -> Cow<'a, PointCloud>,
+    pub(super) points: &'a dyn Fn() -> Cow<'a, PointCloud>,
     /// The points already prepared for ICP, when the caller keeps them.
-    prepared: Option<&'a IcpTarget>,
+    pub(super) prepared: Option<&'a IcpTarget>,
+    /// The surface of a map's points for the agreement counts, made when a hypothesis is
+    /// counted (`None`: the points are not a map's voxel centres).
+    pub(super) surfaces: &'a dyn Fn() -> Option<&'a MapSurfaces>,
 }
 
-fn finish(
+pub(super) fn finish(
     source: &PointCloud,
     against: Against<'_>,
     search: Alignment,
@@ -135,6 +139,7 @@ fn finish(
                 RefineAgainst {
                     points: &points,
                     prepared: against.prepared,
+                    surfaces: (against.surfaces)(),
                 },
                 &search,
                 &extra,
@@ -353,47 +358,12 @@ pub(crate) fn register_preparing<'p>(
             target,
             points: &|| Cow::Borrowed(refine_target),
             prepared,
+            surfaces: &|| None,
         },
         search,
         &|s: &Alignment| upright_starts(search_source, target, &params.search, s, &starts(s)),
         params,
         start,
         on_edge,
-    )
-}
-
-/// Localises a scan in a prior map: the search against the map (no free space is known
-/// for a map file, so the score is the plain overlap), then ICP against the map's voxel
-/// centres. The search's finest resolution is the map's.
-pub fn localize(
-    source: &PointCloud,
-    map: &OccupancyList,
-    params: &RegisterParams,
-) -> Result<Registration> {
-    let start = Instant::now();
-    // The search runs at the map's resolution (the target's); the parameters say so too,
-    // so that their check is of the value in use.
-    let mut search_params = params.search.clone();
-    search_params.resolution = map.resolution();
-    search_params.validate()?;
-    let extent = map
-        .stats()
-        .bbox
-        .map_or(nalgebra::Vector3::zeros(), |b| b.extent());
-    let levels = search_params.levels_for_source(map.resolution(), extent, source);
-    let target = SearchTarget::from_map(map.clone(), levels)?;
-    let search = global_search(source, &target, &search_params)?;
-    finish(
-        source,
-        Against {
-            target: &target,
-            points: &|| Cow::Owned(map.to_cloud()),
-            prepared: None,
-        },
-        search,
-        &|s: &Alignment| upright_starts(source, &target, &search_params, s, &starts(s)),
-        params,
-        start,
-        OnWindowEdge::Refine,
     )
 }

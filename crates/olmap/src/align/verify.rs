@@ -45,7 +45,9 @@
 
 use std::time::Instant;
 
-use super::consistency::{consistency_seen, source_view, Consistency, QuickFit};
+use super::consistency::{
+    consistency_seen, consistency_with_map, source_view, Consistency, MapSurface, QuickFit,
+};
 use super::icp::{
     finish_coarse, refine_unless_joining, Depth, IcpParams, IcpResult, IcpSource, IcpTarget, Joins,
     NearestMemory,
@@ -446,6 +448,37 @@ pub(super) struct RefineAgainst<'a> {
     /// `points` prepared for ICP with the refinement's target parameters; without it the
     /// points around all hypotheses are prepared once here.
     pub(super) prepared: Option<&'a IcpTarget>,
+    /// The points' surface prepared for the agreement counts when they are a map's voxel
+    /// centres at the target's resolution: the map's side is then counted in its own grid
+    /// ([`MapSurfaces`]); without it the points near each hypothesis are voxelised again
+    /// in the source's frame.
+    pub(super) surfaces: Option<&'a MapSurfaces>,
+}
+
+/// A map's surface prepared for the agreement counts of a verification
+/// ([`MapSurface`]): at the target's finest resolution, and at the screening's
+/// ([`SCREEN_LEVEL`]).
+pub(crate) struct MapSurfaces {
+    fine: MapSurface,
+    /// The screening level, and the surface there.
+    screen: (usize, MapSurface),
+}
+
+impl MapSurfaces {
+    /// The surfaces of `target`'s map (its finest level, and the level screening counts
+    /// at), prepared side by side.
+    pub(crate) fn of(target: &SearchTarget) -> Self {
+        let pyramid = target.pyramid();
+        let k = SCREEN_LEVEL.min(pyramid.levels() - 1);
+        let (fine, screen) = rayon::join(
+            || MapSurface::new(pyramid.level(0)),
+            || MapSurface::new(pyramid.level(k)),
+        );
+        MapSurfaces {
+            fine,
+            screen: (k, screen),
+        }
+    }
 }
 
 /// The verdict's thresholds that a global search's verification uses itself.
@@ -594,9 +627,23 @@ pub(super) fn verify(
         (hypotheses, memories)
     });
     let seen = seen?;
-    let counted = |at: &Pose, start: &Pose| {
-        consistency_seen(source, seen.as_ref(), target, Some(&near(start)), at)
+    // A count at `at` of the target's points near `around`, at `target`'s resolution
+    // (`map`: the map's surface there, when prepared).
+    let count_against = |target: &SearchTarget,
+                         seen: Option<&SearchTarget>,
+                         map: Option<&MapSurface>,
+                         at: &Pose,
+                         around: &Pose| match map {
+        Some(m) => {
+            debug_assert_eq!(m.resolution(), target.resolution());
+            let within = near_box(source, around, reach);
+            consistency_with_map(source, seen, target, m, at, within.as_ref())
+        }
+        None => consistency_seen(source, seen, target, Some(&near(around)), at),
     };
+    let fine_map = against.surfaces.map(|m| &m.fine);
+    let counted =
+        |at: &Pose, start: &Pose| count_against(target, seen.as_ref(), fine_map, at, start);
     // Each hypothesis' nearest target points, from its thin stage to its finishing, and
     // the prepared target it is refined against.
     let (mut hypotheses, mut memories): (Vec<Hypothesis>, Vec<NearestMemory>) = first;
@@ -701,9 +748,11 @@ pub(super) fn verify(
                 Some(_) => Some(source_view(source, &coarse)?),
                 None => None,
             };
-            let quick = |at: &Pose| {
-                consistency_seen(source, coarse_seen.as_ref(), &coarse, Some(&near(at)), at)
-            };
+            let coarse_map = against
+                .surfaces
+                .and_then(|m| (m.screen.0 == k).then_some(&m.screen.1));
+            let quick =
+                |at: &Pose| count_against(&coarse, coarse_seen.as_ref(), coarse_map, at, at);
             let reference = quick(&hypotheses[best].pose())?;
             for c in heads {
                 if could_beat(&reference, &quick(&c.pose)?, g.min_refutation) {
@@ -714,22 +763,30 @@ pub(super) fn verify(
     }
     let screened_starts: Vec<Pose> = screened.iter().map(|c| c.pose).collect();
     if !screened.is_empty() {
-        let boxes = screened
-            .iter()
-            .filter_map(|s| near_box(source, &s.pose, reach))
-            .reduce(|a, b| a.union(&b));
-        let b = boxes
-            .as_ref()
-            .map_or_else(|| points.clone(), |b| points.crop_box(b));
-        screen_target = IcpTarget::new(&b, icp)?;
+        // The caller's prepared target holds every point; one prepared here only those
+        // near the search's starts.
+        let screen_against = match external {
+            Some(p) => p,
+            None => {
+                let boxes = screened
+                    .iter()
+                    .filter_map(|s| near_box(source, &s.pose, reach))
+                    .reduce(|a, b| a.union(&b));
+                let b = boxes
+                    .as_ref()
+                    .map_or_else(|| points.clone(), |b| points.crop_box(b));
+                screen_target = IcpTarget::new(&b, icp)?;
+                &screen_target
+            }
+        };
         for start in screened {
             if let Some((mut h, memory)) =
-                try_start(start, Origin::Screened, &screen_target, &hypotheses)
+                try_start(start, Origin::Screened, screen_against, &hypotheses)
             {
                 count(&mut h)?;
                 hypotheses.push(h);
                 memories.push(memory);
-                targets.push(&screen_target);
+                targets.push(screen_against);
             }
         }
     }

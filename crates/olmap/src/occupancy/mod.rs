@@ -22,7 +22,7 @@ mod list;
 mod logodds;
 mod olm;
 mod overlap;
-mod packed;
+pub(crate) mod packed;
 mod pyramid;
 mod query;
 mod query_report;

@@ -1,0 +1,324 @@
+//! Localisation in a prior map: a scan placed in a map with no initial guess, the map
+//! prepared once for every scan placed in it.
+//!
+//! What a map needs before a scan can be searched in it and refined against it does not
+//! depend on the scan: the search's pyramid (and its dense grids, built as the searches
+//! ask for them), the map's voxel centres, and those centres prepared for ICP (indexed
+//! for nearest-point queries, normals estimated as they are asked for). [`Localizer`]
+//! keeps them, so that each scan pays only for its own search, refinement and agreement
+//! counts; [`localize`] is one scan's localisation in a map prepared for it alone.
+
+use std::borrow::Cow;
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Instant;
+
+use nalgebra::Vector3;
+
+use super::icp::IcpTarget;
+use super::register::{finish, refinement_after_search, Against};
+use super::search::global_search;
+use super::target::SearchTarget;
+use super::verify::{starts, upright_starts, MapSurfaces};
+use super::{Alignment, OnWindowEdge, RegisterParams, Registration, SearchParams};
+use crate::cloud::PointCloud;
+use crate::error::Result;
+use crate::occupancy::OccupancyList;
+
+/// A prior map prepared for localising scans in it, one after another or from several
+/// threads at once ([`Localizer::localize`] takes `&self`).
+///
+/// Each answer is the one [`localize`] gives for that scan alone (which prepares the map
+/// the same way, for one scan).
+///
+/// ```
+/// use nalgebra::Point3;
+/// use olmap::align::{Localizer, RegisterParams};
+/// use olmap::cloud::PointCloud;
+/// use olmap::geometry::Pose;
+/// use olmap::occupancy::OccupancyList;
+/// // A map of an L-shaped room (floor and two walls), and a scan of it from (1, 1, 1) that
+/// // saw part of it: the map is prepared once, then any number of scans are placed in it.
+/// let mut points = Vec::new();
+/// for i in 0..60 {
+///     for j in 0..40 {
+///         let (a, b) = (i as f32 * 0.05, j as f32 * 0.05);
+///         points.extend([Point3::new(a, b, 0.0), Point3::new(a, 0.0, b), Point3::new(0.0, a, b)]);
+///     }
+/// }
+/// let room = PointCloud::from_points(points);
+/// let mut map = OccupancyList::new(0.1).unwrap();
+/// map.add_points(&room, &Pose::identity(), 1);
+/// let params = RegisterParams::default();
+/// let localizer = Localizer::new(map, &params).unwrap();
+/// let mut scan = room.clone();
+/// scan.set_origin(Point3::new(1.0, 1.0, 1.0));
+/// let placed = localizer.localize(&scan, &params).unwrap();
+/// assert!(placed.pose.translation().norm() < 0.1);
+/// ```
+pub struct Localizer {
+    /// Search targets by their number of levels (a scan's range sets how many the search
+    /// uses: [`SearchParams::levels_for_source`]); the first made by [`Localizer::new`].
+    targets: Mutex<Vec<Arc<SearchTarget>>>,
+    /// The map's voxel centres, in the map frame (made when first needed: a one-scan
+    /// localisation whose search fails its own tests refines nothing).
+    points: OnceLock<PointCloud>,
+    /// `points` prepared for the refinement (`None` when refinement is off).
+    prepared: Option<IcpTarget>,
+    /// The map's surface for the agreement counts (made when first needed).
+    surfaces: OnceLock<MapSurfaces>,
+    /// The map's bounding-box extent, metres.
+    extent: Vector3<f64>,
+    /// The map's voxel edge, metres.
+    resolution: f64,
+    /// Voxels in the map.
+    voxels: usize,
+}
+
+impl std::fmt::Debug for Localizer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Localizer")
+            .field("voxels", &self.voxels)
+            .field("resolution", &self.resolution)
+            .field("prepared", &self.prepared)
+            .finish()
+    }
+}
+
+impl Localizer {
+    /// Prepares `map` for localising scans in it with `params` (their search parameters
+    /// with the map's resolution, their refinement's target preparation). The search's
+    /// levels are chosen for scans reaching `params.search.max_range`; a scan that reaches
+    /// less may need fewer, and the first such scan prepares that pyramid too.
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidArgument`] for invalid parameters.
+    pub fn new(map: OccupancyList, params: &RegisterParams) -> Result<Self> {
+        Self::build(map, params, None)
+    }
+
+    /// [`Localizer::new`] for one scan: the pyramid for its levels.
+    fn for_one(map: OccupancyList, params: &RegisterParams, source: &PointCloud) -> Result<Self> {
+        Self::build(map, params, Some(source))
+    }
+
+    fn build(
+        map: OccupancyList,
+        params: &RegisterParams,
+        source: Option<&PointCloud>,
+    ) -> Result<Self> {
+        let search = search_params(params, map.resolution())?;
+        let extent = map.stats().bbox.map_or(Vector3::zeros(), |b| b.extent());
+        let levels = match source {
+            Some(s) => search.levels_for_source(map.resolution(), extent, s),
+            None => search.levels_for(extent, search.max_range),
+        };
+        let (resolution, voxels) = (map.resolution(), map.len());
+        let points = OnceLock::new();
+        let prepared = match &params.refine {
+            Some(p) => {
+                let cloud = points.get_or_init(|| map.to_cloud());
+                let icp = refinement_after_search(p, resolution);
+                let (target, prepared) = rayon::join(
+                    || -> Result<(SearchTarget, MapSurfaces)> {
+                        let target = SearchTarget::from_map(map, levels)?;
+                        let surfaces = MapSurfaces::of(&target);
+                        Ok((target, surfaces))
+                    },
+                    || IcpTarget::of_map(cloud, &icp, resolution),
+                );
+                let (target, surfaces) = target?;
+                return Ok(Localizer {
+                    targets: Mutex::new(vec![Arc::new(target)]),
+                    points,
+                    prepared: Some(prepared?),
+                    surfaces: OnceLock::from(surfaces),
+                    extent,
+                    resolution,
+                    voxels,
+                });
+            }
+            None => None,
+        };
+        Ok(Localizer {
+            targets: Mutex::new(vec![Arc::new(SearchTarget::from_map(map, levels)?)]),
+            points,
+            prepared,
+            surfaces: OnceLock::new(),
+            extent,
+            resolution,
+            voxels,
+        })
+    }
+
+    /// The map's voxel edge, metres (the search's finest resolution).
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    /// Voxels in the map.
+    pub fn len(&self) -> usize {
+        self.voxels
+    }
+
+    /// Whether the map has no voxel.
+    pub fn is_empty(&self) -> bool {
+        self.voxels == 0
+    }
+
+    /// The map's surface for the agreement counts (made on the first call when not made
+    /// yet).
+    fn surfaces(&self) -> &MapSurfaces {
+        self.surfaces.get_or_init(|| {
+            let first = {
+                let targets = self
+                    .targets
+                    .lock()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+                Arc::clone(&targets[0])
+            };
+            MapSurfaces::of(&first)
+        })
+    }
+
+    /// The map's voxel centres (made on the first call when not made yet).
+    fn points(&self) -> &PointCloud {
+        self.points.get_or_init(|| {
+            let targets = self
+                .targets
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            targets[0].pyramid().level(0).to_cloud()
+        })
+    }
+
+    /// The search target with `levels` levels, made from the first one's map when no
+    /// query asked for that many before.
+    fn target(&self, levels: usize) -> Result<Arc<SearchTarget>> {
+        let mut targets = self
+            .targets
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(t) = targets.iter().find(|t| t.pyramid().levels() == levels) {
+            return Ok(Arc::clone(t));
+        }
+        let map = targets[0].pyramid().level(0).clone();
+        let t = Arc::new(SearchTarget::from_map(map, levels)?);
+        targets.push(Arc::clone(&t));
+        Ok(t)
+    }
+
+    /// Localises `source` (a scan in its sensor frame) in the map: the global search (or
+    /// the window or locus `params.search.region` names) against the map, no free space
+    /// being known for a map (the score is the plain overlap), then ICP against the map's
+    /// voxel centres and the verdict. [`Registration::seconds`] counts this call only,
+    /// not the map's preparation. Refinement parameters that prepare a target otherwise
+    /// than those given to [`Localizer::new`] (another target voxel, normal source or
+    /// neighbourhood) are served by a preparation for this call alone.
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidArgument`] for invalid parameters.
+    pub fn localize(&self, source: &PointCloud, params: &RegisterParams) -> Result<Registration> {
+        let start = Instant::now();
+        let resolution = self.resolution();
+        let search_params = search_params(params, resolution)?;
+        let levels = search_params.levels_for_source(resolution, self.extent, source);
+        let target = self.target(levels)?;
+        let search = global_search(source, &target, &search_params)?;
+        finish(
+            source,
+            Against {
+                target: &target,
+                points: &|| Cow::Borrowed(self.points()),
+                prepared: self.prepared.as_ref(),
+                surfaces: &|| Some(self.surfaces()),
+            },
+            search,
+            &|s: &Alignment| upright_starts(source, &target, &search_params, s, &starts(s)),
+            params,
+            start,
+            OnWindowEdge::Refine,
+        )
+    }
+}
+
+/// `params`' search at the map's `resolution` (the search's finest is the map's; the
+/// parameters say so too, so that their check is of the value in use).
+fn search_params(params: &RegisterParams, resolution: f64) -> Result<SearchParams> {
+    let mut search = params.search.clone();
+    search.resolution = resolution;
+    search.validate()?;
+    Ok(search)
+}
+
+/// Localises a scan in a prior map: [`Localizer::localize`] in a map prepared for this
+/// scan alone (the pyramid its range asks for). [`Registration::seconds`] includes that
+/// preparation. To place many scans in one map, prepare it once with [`Localizer::new`].
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] for invalid parameters.
+pub fn localize(
+    source: &PointCloud,
+    map: &OccupancyList,
+    params: &RegisterParams,
+) -> Result<Registration> {
+    let start = Instant::now();
+    let localizer = Localizer::for_one(map.clone(), params, source)?;
+    let mut r = localizer.localize(source, params)?;
+    r.seconds = start.elapsed().as_secs_f64();
+    Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{pose_error, simulate, SimConfig};
+
+    /// A map prepared once places held-out scans of the simulated lab as a map prepared
+    /// for each scan does (the same pose and verdict), right where trusted; a query
+    /// asking for a pyramid of other levels gets one made from the map.
+    #[test]
+    fn a_map_prepared_once_places_scans_as_one_prepared_for_each() {
+        let data = simulate(&SimConfig::demo_lab(3, 1, 10), |_, _| {}).unwrap();
+        let robot = &data.robots[0];
+        let held_out = [2, 7];
+        let mut map = OccupancyList::new(0.1).unwrap();
+        for (i, (scan, pose)) in robot.scans.iter().zip(&robot.truth).enumerate() {
+            if !held_out.contains(&i) {
+                map.add_points(scan, pose, 1);
+            }
+        }
+        let params = RegisterParams::default();
+        let localizer = Localizer::new(map.clone(), &params).unwrap();
+        assert_eq!(localizer.len(), map.len());
+        let mut trusted = 0;
+        for i in held_out {
+            let once = localizer.localize(&robot.scans[i], &params).unwrap();
+            let each = localize(&robot.scans[i], &map, &params).unwrap();
+            assert_eq!(
+                once.trusted, each.trusted,
+                "{:?} / {:?}",
+                once.doubts, each.doubts
+            );
+            let (dt, dr) = pose_error(&once.pose, &each.pose);
+            assert!(
+                dt < 1e-3 && dr.to_degrees() < 0.01,
+                "{dt} m, {dr} rad apart"
+            );
+            if once.trusted {
+                let (dt, dr) = pose_error(&once.pose, &robot.truth[i]);
+                assert!(dt < 0.1 && dr.to_degrees() < 1.0, "{dt} m, {dr} rad off");
+                trusted += 1;
+            }
+        }
+        assert!(trusted >= 1, "held-out scans of a mapped lab are placed");
+        let first = localizer.target(5).unwrap();
+        let other = localizer.target(7).unwrap();
+        assert_eq!(other.pyramid().levels(), 7);
+        assert_eq!(other.pyramid().level(0).len(), map.len());
+        assert!(
+            Arc::ptr_eq(&first, &localizer.target(5).unwrap()),
+            "kept, not made again"
+        );
+        assert_eq!(localizer.targets.lock().unwrap().len(), 2);
+    }
+}
