@@ -306,3 +306,139 @@ pub fn localize(
     .py_err()?;
     Ok(PyAlignment::new(&r, &s.name(), &map.source_name()))
 }
+
+/// A map prepared once for localising many scans in it (a localisation service): its
+/// search pyramid, its voxel centres indexed for ICP, and its surface for the agreement
+/// checks are made here, so that each ``localize`` pays only for its own search,
+/// refinement and checks. A snapshot: later changes to the OccupancyMap are not seen.
+///
+/// Args:
+///     map: an OccupancyMap.
+///     dof, max_tilt, search, refine, max_range, levels: as for ``olmap.localize``, kept
+///         for every query (the resolution is the map's).
+///     threads: threads for the preparation (0: one per core).
+///
+/// Each result is the one ``olmap.localize`` gives for that scan.
+#[pyclass(frozen, module = "olmap", name = "Localizer")]
+pub struct PyLocalizer {
+    inner: library::Localizer,
+    settings: QuerySettings,
+    map_name: String,
+}
+
+/// The parameters a [`PyLocalizer`] keeps for its queries.
+struct QuerySettings {
+    resolution: f64,
+    levels: usize,
+    dof: String,
+    max_tilt: f64,
+    search: String,
+    refine: bool,
+    max_range: f64,
+}
+
+impl QuerySettings {
+    fn params(
+        &self,
+        guess: Option<&Bound<'_, PyAny>>,
+        window: Option<Vec<f64>>,
+    ) -> PyResult<RegisterParams> {
+        register_params(
+            self.resolution,
+            self.levels,
+            &self.dof,
+            self.max_tilt,
+            guess,
+            window,
+            &self.search,
+            self.refine,
+            self.max_range,
+        )
+    }
+}
+
+#[pymethods]
+impl PyLocalizer {
+    #[new]
+    #[pyo3(signature = (map, dof="xyz-yaw", max_tilt=15.0, search="multires", refine=true,
+                        max_range=30.0, threads=0, levels=0))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        map: &Bound<'_, PyOccupancyMap>,
+        dof: &str,
+        max_tilt: f64,
+        search: &str,
+        refine: bool,
+        max_range: f64,
+        threads: i64,
+        levels: usize,
+    ) -> PyResult<Self> {
+        let map = map.get();
+        let settings = QuerySettings {
+            resolution: map.resolution_m(),
+            levels,
+            dof: dof.to_owned(),
+            max_tilt,
+            search: search.to_owned(),
+            refine,
+            max_range,
+        };
+        let params = settings.params(None, None)?;
+        let inner = detached(py, threads, || {
+            library::Localizer::new(map.read().clone(), &params)
+        })?
+        .py_err()?;
+        Ok(PyLocalizer {
+            inner,
+            settings,
+            map_name: map.source_name(),
+        })
+    }
+
+    /// Localises a scan in the prepared map, as ``olmap.localize`` does.
+    ///
+    /// Args:
+    ///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.
+    ///     guess, window: as for ``olmap.localize`` (a window around the guess instead of
+    ///         the whole map and every heading).
+    ///     threads: threads for this query (0: one per core).
+    ///
+    /// Returns:
+    ///     Alignment: ``T_target_source`` is ``T_map_scan``; ``seconds`` counts this query
+    ///     alone.
+    #[pyo3(signature = (scan, guess=None, window=None, threads=0))]
+    fn localize(
+        &self,
+        py: Python<'_>,
+        scan: &Bound<'_, PyAny>,
+        guess: Option<&Bound<'_, PyAny>>,
+        window: Option<Vec<f64>>,
+        threads: i64,
+    ) -> PyResult<PyAlignment> {
+        let params = self.settings.params(guess, window)?;
+        let s = cloud_arg(scan, "scan")?;
+        let r = detached(py, threads, || self.inner.localize(s.get(), &params))?.py_err()?;
+        Ok(PyAlignment::new(&r, &s.name(), &self.map_name))
+    }
+
+    /// Voxels in the prepared map.
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// The map's voxel edge, metres.
+    #[getter]
+    fn resolution(&self) -> f64 {
+        self.inner.resolution()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Localizer({} voxels at {} m, {})",
+            self.inner.len(),
+            self.inner.resolution(),
+            self.map_name
+        )
+    }
+}

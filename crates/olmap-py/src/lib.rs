@@ -8,7 +8,7 @@
 //! the library's reports as dicts (the schemas of the command line's `--json`).
 //!
 //! One file per part of the API: [`cloud`] (PointCloud, read/write), [`align`] (align,
-//! localize, Alignment), [`map`] (OccupancyMap), [`free_space`] (FreeSpaceMap), [`poses`] (read_poses), [`build`] (build_map), [`sim`] (simulate,
+//! localize, Alignment, Localizer), [`map`] (OccupancyMap), [`free_space`] (FreeSpaceMap), [`poses`] (read_poses), [`build`] (build_map), [`sim`] (simulate,
 //! map_team), [`beacon`] (detect_beacons, mutual_localisation); [`convert`] (numpy in and
 //! out), [`errors`] (exceptions) and [`threads`] (GIL release, thread counts).
 //!
@@ -40,6 +40,7 @@ fn _olmap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("TooLargeError", m.py().get_type::<errors::TooLargeError>())?;
     m.add_class::<cloud::PyPointCloud>()?;
     m.add_class::<align::PyAlignment>()?;
+    m.add_class::<align::PyLocalizer>()?;
     m.add_class::<map::PyOccupancyMap>()?;
     m.add_class::<free_space::PyFreeSpaceMap>()?;
     m.add_class::<build::PyMapBuild>()?;

@@ -13,7 +13,7 @@ PUBLIC_FUNCTIONS = [
 ]
 CLASSES = [
     olmap.PointCloud, olmap.Alignment, olmap.OccupancyMap, olmap.FreeSpaceMap, olmap.MapBuild, olmap.SimDataset,
-    olmap.TeamResult,
+    olmap.TeamResult, olmap.Localizer,
 ]
 
 

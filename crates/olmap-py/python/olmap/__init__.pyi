@@ -193,6 +193,30 @@ def localize(
     threads: int = 0,
     levels: int = 0,
 ) -> Alignment: ...
+class Localizer:
+    """A map prepared once for localising many scans in it (see olmap.localize)."""
+    def __init__(
+        self,
+        map: OccupancyMap,
+        dof: str = "xyz-yaw",
+        max_tilt: float = 15.0,
+        search: str = "multires",
+        refine: bool = True,
+        max_range: float = 30.0,
+        threads: int = 0,
+        levels: int = 0,
+    ) -> None: ...
+    def localize(
+        self,
+        scan: Points,
+        guess: Optional[Pose] = None,
+        window: Optional[Sequence[float]] = None,
+        threads: int = 0,
+    ) -> Alignment: ...
+    def __len__(self) -> int: ...
+    @property
+    def resolution(self) -> float: ...
+
 def build_map(
     scans: Sequence[Points],
     odometry: Optional[Sequence[Pose]] = None,
