@@ -77,11 +77,14 @@ pub struct AlignArgs {
     /// every pose scores alike (a floor against a floor). Default: the library's.
     #[arg(long, value_name = "N")]
     pub exact_max_work: Option<f64>,
-    /// Further scans to place in the same map, after SOURCE (`localize` only): the map is
-    /// prepared once (its search pyramid, its voxel centres indexed for ICP) and each scan
-    /// pays only for its own search, refinement and checks; each `seconds` then counts
-    /// that scan alone. Text prints each result under its scan's name; --json prints one
-    /// object, `{"prepare_seconds": .., "results": [..]}`, a report per scan in order.
+    /// Further scans to place in the same map after SOURCE (a map target only): the map is
+    /// prepared once (its search pyramid, its voxel centres indexed for ICP, its surface
+    /// for the agreement checks) and each scan pays only for its own search, refinement
+    /// and checks; each `seconds` then counts that scan alone. Every option applies to
+    /// every scan (one --guess and --window for all). Give it after the positional
+    /// arguments (it takes every value that follows). Text prints each result under its
+    /// scan's name; --json prints one object, `{"prepare_seconds": .., "results": [..]}`,
+    /// a report per scan in order.
     #[arg(long, value_name = "SCAN", num_args = 1..)]
     pub also: Vec<PathBuf>,
     /// Print JSON instead of text.

@@ -226,16 +226,19 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         }
         (side, through)
     };
-    let parts: Vec<(SideAgreement, Vec<(VoxelKey, bool)>)> =
-        keys.par_chunks(COUNT_CHUNK).map(count_chunk).collect();
+    let parts: Vec<Part> = keys.par_chunks(COUNT_CHUNK).map(count_chunk).collect();
     add_parts(parts)
 }
+
+/// One part of a count: the supported voxels of a chunk, and its voxels seen through
+/// (each with whether it is upright).
+type Part = (SideAgreement, Vec<(VoxelKey, bool)>);
 
 /// One count from its parallel parts: supported voxels added, seen-through ones counted
 /// as contradicted only in patches. A wall or a piece of furniture standing in the other's
 /// open space is a patch of voxels; a stray return (noise, a spurious point, a random
 /// outlier) is not and says nothing about the pose.
-fn add_parts(parts: Vec<(SideAgreement, Vec<(VoxelKey, bool)>)>) -> SideAgreement {
+fn add_parts(parts: Vec<Part>) -> SideAgreement {
     let mut side = SideAgreement::default();
     let mut seen_through = std::collections::HashMap::new();
     for (part, through) in parts {
@@ -303,6 +306,9 @@ const SLAB_MARGIN: i64 = 2;
 /// A dense grid of `keys` over their key box, or `None` when it holds more than
 /// [`MAX_LOCAL_GRID_CELLS`] cells.
 fn slab_grid(keys: &[VoxelKey]) -> Option<DenseGrid> {
+    if keys.is_empty() {
+        return None;
+    }
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
     for k in keys {
@@ -336,7 +342,9 @@ impl MapSurface {
     /// with a dense grid of its voxels and the [`SLAB_MARGIN`] cells either side that the
     /// tests read (a whole map's box may be too large for one grid: a 200 x 200 x 10 m
     /// hall at 0.05 m spans 3.2 x 10^9 cells; its hash answers the same, many times
-    /// slower).
+    /// slower). A slab's grid is capped as a count's own is ([`MAX_LOCAL_GRID_CELLS`],
+    /// 128 MiB; one per thread at once; the hall's slabs hold 20 MiB); past it the slab
+    /// answers from the map's hash.
     pub(crate) fn new(map: &OccupancyList) -> Self {
         let mut keys: Vec<VoxelKey> = map.iter().map(|(k, _)| k).collect();
         keys.par_sort_unstable_by_key(|k| (k.x, k.y, k.z));
@@ -358,11 +366,15 @@ impl MapSurface {
             .par_iter()
             .flat_map_iter(|&start| {
                 let end = start + SURFACE_SLAB_CELLS as i64 - 1;
-                let read = between(start - SLAB_MARGIN, end + SLAB_MARGIN);
-                let grid = slab_grid(read);
+                let own = between(start, end);
+                // (A slab in a gap of the map along x has nothing to test.)
+                let grid = if own.is_empty() {
+                    None
+                } else {
+                    slab_grid(between(start - SLAB_MARGIN, end + SLAB_MARGIN))
+                };
                 let occ = grid.as_ref().map_or(Occupied::Hash(map), Occupied::Dense);
-                between(start, end)
-                    .iter()
+                own.iter()
                     .filter(move |&&k| is_surface(occ, k))
                     .filter_map(move |&k| {
                         let up = if is_upright(occ, k) { UPRIGHT_BIT } else { 0 };
@@ -386,14 +398,15 @@ impl MapSurface {
     /// The map's side of [`consistency_seen`] with the scan placed by `pose`
     /// (`T_map_scan`): the surface voxels whose centres lie in `within` (map frame; all
     /// when `None`) against `seen`, the scan's view at this surface's resolution in its
-    /// own frame, from its sensor at `origin` (scan frame).
+    /// own frame, from its sensor at `origin` (scan frame); `None` when no surface voxel
+    /// lies in `within`.
     pub(crate) fn count(
         &self,
         seen: &SearchTarget,
         origin: &Point3<f64>,
         pose: &Pose,
         within: Option<&crate::geometry::Aabb>,
-    ) -> SideAgreement {
+    ) -> Option<SideAgreement> {
         let res = self.resolution;
         debug_assert_eq!(res, seen.resolution());
         let levels = seen.pyramid().levels();
@@ -401,6 +414,7 @@ impl MapSurface {
         let count_chunk = |chunk: &[u64]| {
             let mut side = SideAgreement::default();
             let mut through = Vec::new();
+            let mut inside = false;
             for &v in chunk {
                 let k = unpack_key(v & !UPRIGHT_BIT);
                 let centre = Point3::new(
@@ -411,6 +425,7 @@ impl MapSurface {
                 if within.is_some_and(|b| !b.contains(&centre)) {
                     continue;
                 }
+                inside = true;
                 let p = to_scan.transform_point(&centre);
                 let Some(ks) = VoxelKey::from_point(&p, res) else {
                     continue;
@@ -426,15 +441,18 @@ impl MapSurface {
                     through.push((k, up));
                 }
             }
-            (side, through)
+            ((side, through), inside)
         };
         let rows = self.rows_within(within);
-        add_parts(
-            rows.par_iter()
-                .flat_map_iter(|row| row.chunks(COUNT_CHUNK))
-                .map(count_chunk)
-                .collect(),
-        )
+        let parts: Vec<(Part, bool)> = rows
+            .par_iter()
+            .flat_map_iter(|row| row.chunks(COUNT_CHUNK))
+            .map(count_chunk)
+            .collect();
+        // Nothing of the map where the scan could be: no side to count (as for an empty
+        // crop of a target's points).
+        let any = parts.iter().any(|(_, inside)| *inside);
+        any.then(|| add_parts(parts.into_iter().map(|(part, _)| part).collect()))
     }
 
     /// The runs of [`MapSurface::voxels`] whose keys lie in the x-y key columns that
@@ -642,7 +660,7 @@ pub(crate) fn consistency_with_map(
                 target,
             ))
         },
-        || seen_from_source.map(|seen| map.count(seen, &source.origin(), pose, within)),
+        || seen_from_source.and_then(|seen| map.count(seen, &source.origin(), pose, within)),
     );
     Ok(Consistency {
         source: source_side?,
@@ -1014,8 +1032,9 @@ mod tests {
     }
 
     /// A map taken slab by slab holds the surface, and the upright marks, that the whole
-    /// map's lookups give: at 0.1 m the hall spans 501 cells along x (four slabs, the
-    /// pillars and walls across their edges), at 0.25 m 201 (two).
+    /// map's lookups give: at 0.1 m each hall spans 501 cells along x (four slabs, the
+    /// pillars and walls across their edges), at 0.25 m 201 (two), and slabs between the
+    /// two halls hold nothing.
     #[test]
     fn a_map_surface_made_in_slabs_is_the_surface_made_whole() {
         let sparse = hall(&[(3.0, 2.0), (-8.0, 5.0), (12.8, -6.0)], Point3::origin());
@@ -1055,6 +1074,13 @@ mod tests {
                 }
             }
         }
+        // A second hall 80 m along x: a gap of 30 m (300 cells at 0.1 m, slabs with no
+        // voxel at all).
+        let far: Vec<Point3<f32>> = points
+            .iter()
+            .map(|p| p + nalgebra::Vector3::new(80.0, 0.0, 0.0))
+            .collect();
+        points.extend(far);
         let cloud = PointCloud::from_points(points);
         for res in [0.1, 0.25] {
             let mut map = OccupancyList::new(res).unwrap();
@@ -1121,6 +1147,16 @@ mod tests {
         assert!(
             contradicted > 0,
             "the wrong poses must contradict somewhere"
+        );
+        // No surface voxel in the box: no map side (as for an empty crop of points).
+        let away = crate::geometry::Aabb::new(
+            Point3::new(100.0, 100.0, 0.0),
+            Point3::new(110.0, 110.0, 1.0),
+        );
+        let pose = Pose::identity();
+        assert_eq!(
+            surface.count(&seen, &source_cloud.origin(), &pose, Some(&away)),
+            None
         );
     }
 }
