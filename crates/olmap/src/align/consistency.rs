@@ -612,14 +612,7 @@ pub fn consistency_seen(
     let res = target.resolution();
     // The two sides are independent: counted side by side.
     let (source_side, target_side) = rayon::join(
-        || -> Result<SideAgreement> {
-            let moved = OccupancyList::occupied_by(source, pose, res)?;
-            Ok(count_side(
-                &moved,
-                &pose.transform_point(&source.origin()),
-                target,
-            ))
-        },
+        || source_side(source, target, pose),
         || -> Result<Option<SideAgreement>> {
             match (target_points, seen_from_source) {
                 (Some(t), Some(seen)) if !t.is_empty() => {
@@ -638,6 +631,17 @@ pub fn consistency_seen(
     })
 }
 
+/// The source's side of a count: its voxels placed by `pose` in `target`'s frame, at
+/// `target`'s finest resolution, against `target`.
+fn source_side(source: &PointCloud, target: &SearchTarget, pose: &Pose) -> Result<SideAgreement> {
+    let moved = OccupancyList::occupied_by(source, pose, target.resolution())?;
+    Ok(count_side(
+        &moved,
+        &pose.transform_point(&source.origin()),
+        target,
+    ))
+}
+
 /// [`consistency_seen`] against a map whose surface was prepared once ([`MapSurface`], at
 /// `target`'s finest resolution): the source's side as there, the map's side taken in the
 /// map's own grid over the surface voxels within `within` (map frame; all when `None`).
@@ -652,14 +656,7 @@ pub(crate) fn consistency_with_map(
 ) -> Result<Consistency> {
     let res = target.resolution();
     let (source_side, map_side) = rayon::join(
-        || -> Result<SideAgreement> {
-            let moved = OccupancyList::occupied_by(source, pose, res)?;
-            Ok(count_side(
-                &moved,
-                &pose.transform_point(&source.origin()),
-                target,
-            ))
-        },
+        || source_side(source, target, pose),
         || seen_from_source.and_then(|seen| map.count(seen, &source.origin(), pose, within)),
     );
     Ok(Consistency {
