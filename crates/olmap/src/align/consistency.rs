@@ -417,11 +417,7 @@ impl MapSurface {
             let mut inside = false;
             for &v in chunk {
                 let k = unpack_key(v & !UPRIGHT_BIT);
-                let centre = Point3::new(
-                    (k.x as f64 + 0.5) * res,
-                    (k.y as f64 + 0.5) * res,
-                    (k.z as f64 + 0.5) * res,
-                );
+                let centre = k.center(res);
                 if within.is_some_and(|b| !b.contains(&centre)) {
                     continue;
                 }

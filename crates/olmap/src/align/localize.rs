@@ -216,7 +216,7 @@ impl Localizer {
                 target: &target,
                 points: &|| Cow::Borrowed(&self.points),
                 prepared: self.prepared.as_ref(),
-                surfaces: &|| Some(&self.surfaces),
+                surfaces: Some(&self.surfaces),
             },
             search,
             &|s: &Alignment| upright_starts(source, &target, &search_params, s, &starts(s)),

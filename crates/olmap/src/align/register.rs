@@ -93,9 +93,9 @@ pub(super) struct Against<'a> {
     pub(super) points: &'a dyn Fn() -> Cow<'a, PointCloud>,
     /// The points already prepared for ICP, when the caller keeps them.
     pub(super) prepared: Option<&'a IcpTarget>,
-    /// The surface of a map's points for the agreement counts, made when a hypothesis is
-    /// counted (`None`: the points are not a map's voxel centres).
-    pub(super) surfaces: &'a dyn Fn() -> Option<&'a MapSurfaces>,
+    /// The surface of a map's points for the agreement counts, prepared with the map
+    /// (`None`: the points are not a map's voxel centres).
+    pub(super) surfaces: Option<&'a MapSurfaces>,
 }
 
 pub(super) fn finish(
@@ -139,7 +139,7 @@ pub(super) fn finish(
                 RefineAgainst {
                     points: &points,
                     prepared: against.prepared,
-                    surfaces: (against.surfaces)(),
+                    surfaces: against.surfaces,
                 },
                 &search,
                 &extra,
@@ -358,7 +358,7 @@ pub(crate) fn register_preparing<'p>(
             target,
             points: &|| Cow::Borrowed(refine_target),
             prepared,
-            surfaces: &|| None,
+            surfaces: None,
         },
         search,
         &|s: &Alignment| upright_starts(search_source, target, &params.search, s, &starts(s)),
