@@ -257,26 +257,31 @@ pub fn align(
     Ok(PyAlignment::new(&r, &s.name(), &t.name()))
 }
 
-/// Localises a scan in a map: ``align`` against an OccupancyMap (the search runs at the
-/// map's resolution; the score is the plain overlap, as a map stores no free space), then
-/// ICP against the map's voxel centres. Same result as ``olmap localize``.
+/// Localises a scan in a map: ``align`` against an OccupancyMap (the score is the plain
+/// overlap, as a map stores no free space), then ICP against the map's voxel centres. Same
+/// result as ``olmap localize``.
 ///
 /// Args:
 ///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.
 ///     map: an OccupancyMap.
+///     resolution: finest voxel edge of the search, metres. Default 0.1. A map finer than
+///         this is read at its pyramid level closest to it without exceeding it (its voxel
+///         edge doubled: a 0.025 m map at 0.1 m); a map at or above it at its own.
 ///     dof, max_tilt, guess, window, search, refine, max_range, threads, levels: as for
-///         ``align`` (the resolution is the map's).
+///         ``align``.
 ///
 /// Returns:
 ///     Alignment: ``T_target_source`` is ``T_map_scan``.
 #[pyfunction]
-#[pyo3(signature = (scan, map, dof="xyz-yaw", max_tilt=15.0, guess=None, window=None,
-                    search="multires", refine=true, max_range=30.0, threads=0, levels=0))]
+#[pyo3(signature = (scan, map, resolution=0.1, dof="xyz-yaw", max_tilt=15.0, guess=None,
+                    window=None, search="multires", refine=true, max_range=30.0, threads=0,
+                    levels=0))]
 #[allow(clippy::too_many_arguments)]
 pub fn localize(
     py: Python<'_>,
     scan: &Bound<'_, PyAny>,
     map: &Bound<'_, PyOccupancyMap>,
+    resolution: f64,
     dof: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
@@ -289,15 +294,7 @@ pub fn localize(
 ) -> PyResult<PyAlignment> {
     let map = map.get();
     let params = register_params(
-        map.resolution_m(),
-        levels,
-        dof,
-        max_tilt,
-        guess,
-        window,
-        search,
-        refine,
-        max_range,
+        resolution, levels, dof, max_tilt, guess, window, search, refine, max_range,
     )?;
     let s = cloud_arg(scan, "scan")?;
     let r = detached(py, threads, || {
@@ -314,8 +311,9 @@ pub fn localize(
 ///
 /// Args:
 ///     map: an OccupancyMap.
-///     dof, max_tilt, search, refine, max_range, levels: as for ``olmap.localize``, kept
-///         for every query (the resolution is the map's).
+///     resolution, dof, max_tilt, search, refine, max_range, levels: as for
+///         ``olmap.localize``, kept for every query (a map finer than ``resolution`` is
+///         prepared at its pyramid level within it).
 ///     threads: threads for the preparation (0: one per core).
 ///
 /// Each result is the one ``olmap.localize`` gives for that scan.
@@ -360,12 +358,13 @@ impl QuerySettings {
 #[pymethods]
 impl PyLocalizer {
     #[new]
-    #[pyo3(signature = (map, dof="xyz-yaw", max_tilt=15.0, search="multires", refine=true,
-                        max_range=30.0, threads=0, levels=0))]
+    #[pyo3(signature = (map, resolution=0.1, dof="xyz-yaw", max_tilt=15.0, search="multires",
+                        refine=true, max_range=30.0, threads=0, levels=0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         map: &Bound<'_, PyOccupancyMap>,
+        resolution: f64,
         dof: &str,
         max_tilt: f64,
         search: &str,
@@ -376,7 +375,7 @@ impl PyLocalizer {
     ) -> PyResult<Self> {
         let map = map.get();
         let settings = QuerySettings {
-            resolution: map.resolution_m(),
+            resolution,
             levels,
             dof: dof.to_owned(),
             max_tilt,
@@ -427,10 +426,17 @@ impl PyLocalizer {
         self.inner.len()
     }
 
-    /// The map's voxel edge, metres.
+    /// The voxel edge scans are placed at, metres: the map's own, or its pyramid level
+    /// within the search's resolution for a finer map.
     #[getter]
     fn resolution(&self) -> f64 {
         self.inner.resolution()
+    }
+
+    /// The map's own voxel edge, metres.
+    #[getter]
+    fn map_resolution(&self) -> f64 {
+        self.inner.map_resolution()
     }
 
     fn __repr__(&self) -> String {

@@ -34,7 +34,9 @@ pub struct AlignArgs {
     pub source: PathBuf,
     /// What to place it in: a point cloud, or a map (.olm, .bt) for localisation.
     pub target: PathBuf,
-    /// Finest voxel edge of the search, metres (maps use their own).
+    /// Finest voxel edge of the search, metres. A map finer than this is localised in at
+    /// its pyramid level closest to it without exceeding it (its voxel edge doubled: a
+    /// 0.025 m map at 0.1 m), a map at or above it at its own voxel edge.
     #[arg(long, default_value_t = 0.1)]
     pub resolution: f64,
     /// Pyramid levels (0: automatic, coarsest at least 16x the finest).
@@ -83,8 +85,9 @@ pub struct AlignArgs {
     /// and checks; each `seconds` then counts that scan alone. Every option applies to
     /// every scan (one --guess and --window for all). Give it after the positional
     /// arguments (it takes every value that follows). Text prints each result under its
-    /// scan's name; --json prints one object, `{"prepare_seconds": .., "results": [..]}`,
-    /// a report per scan in order.
+    /// scan's name; --json prints one object, `{"prepare_seconds": .., "map_resolution":
+    /// .., "resolution": .., "results": [..]}` (the map's voxel edge, the one it was read
+    /// at), a report per scan in order.
     #[arg(long, value_name = "SCAN", num_args = 1..)]
     pub also: Vec<PathBuf>,
     /// Print JSON instead of text.
@@ -313,9 +316,11 @@ fn localize_many(a: &AlignArgs, p: &RegisterParams) -> anyhow::Result<ExitCode> 
     let mut reports = Vec::new();
     if !a.json {
         println!(
-            "prepared {} ({} voxels) in {prepare_seconds:.3} s",
+            "prepared {} ({} voxels at {} m, read at {} m) in {prepare_seconds:.3} s",
             target,
-            localizer.len()
+            localizer.len(),
+            localizer.map_resolution(),
+            localizer.resolution()
         );
     }
     for (path, scan) in paths.iter().zip(&scans) {
@@ -334,6 +339,8 @@ fn localize_many(a: &AlignArgs, p: &RegisterParams) -> anyhow::Result<ExitCode> 
     if a.json {
         let v = serde_json::json!({
             "prepare_seconds": prepare_seconds,
+            "map_resolution": localizer.map_resolution(),
+            "resolution": localizer.resolution(),
             "results": reports,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);

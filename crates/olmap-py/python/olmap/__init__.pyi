@@ -183,6 +183,7 @@ def align(
 def localize(
     scan: Points,
     map: OccupancyMap,
+    resolution: float = 0.1,
     dof: str = "xyz-yaw",
     max_tilt: float = 15.0,
     guess: Optional[Pose] = None,
@@ -198,6 +199,7 @@ class Localizer:
     def __init__(
         self,
         map: OccupancyMap,
+        resolution: float = 0.1,
         dof: str = "xyz-yaw",
         max_tilt: float = 15.0,
         search: str = "multires",
@@ -216,6 +218,8 @@ class Localizer:
     def __len__(self) -> int: ...
     @property
     def resolution(self) -> float: ...
+    @property
+    def map_resolution(self) -> float: ...
 
 def build_map(
     scans: Sequence[Points],

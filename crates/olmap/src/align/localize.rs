@@ -7,6 +7,13 @@
 //! for nearest-point queries, normals estimated as they are asked for). [`Localizer`]
 //! keeps them, so that each scan pays only for its own search, refinement and agreement
 //! counts; [`localize`] is one scan's localisation in a map prepared for it alone.
+//!
+//! A map may be stored finer than localisation needs (a 0.025 m map of a large hall holds
+//! 10^7 voxels, and its finest cells are smaller than a lidar's noise and its point spacing
+//! at range). A scan is placed at the search's resolution (`params.search.resolution`,
+//! 0.1 m by default): a finer map is read at the level of its pyramid (its voxel edge
+//! doubled, as often as needed) closest to that resolution without exceeding it — searched,
+//! refined against and verified there — and a map at or above it at its own voxel.
 
 use std::borrow::Cow;
 use std::sync::{Arc, Mutex};
@@ -34,7 +41,8 @@ use crate::occupancy::OccupancyList;
 ///
 /// Memory: the map's search pyramid, its voxel centres (12 bytes a voxel), their ICP
 /// index with the normals estimated so far (about 40 bytes a point once asked) and its
-/// surface (8 bytes a surface voxel): 1.1 GB at peak for a 5.2 M-voxel warehouse map.
+/// surface (8 bytes a surface voxel), all at [`Localizer::resolution`]: 1.1 GB at peak for
+/// a 5.2 M-voxel warehouse map prepared at its own 0.05 m.
 ///
 /// ```
 /// use nalgebra::Point3;
@@ -73,9 +81,12 @@ pub struct Localizer {
     surfaces: MapSurfaces,
     /// The map's bounding-box extent, metres.
     extent: Vector3<f64>,
-    /// The map's voxel edge, metres.
+    /// The voxel edge scans are placed at, metres: the map's own, doubled while the result
+    /// stays within the search's resolution.
     resolution: f64,
-    /// Voxels in the map.
+    /// The map's own voxel edge, metres.
+    map_resolution: f64,
+    /// Voxels in the map as given.
     voxels: usize,
 }
 
@@ -84,16 +95,19 @@ impl std::fmt::Debug for Localizer {
         f.debug_struct("Localizer")
             .field("voxels", &self.voxels)
             .field("resolution", &self.resolution)
+            .field("map_resolution", &self.map_resolution)
             .field("prepared", &self.prepared)
             .finish()
     }
 }
 
 impl Localizer {
-    /// Prepares `map` for localising scans in it with `params` (their search parameters
-    /// with the map's resolution, their refinement's target preparation). The search's
-    /// levels are chosen for scans reaching `params.search.max_range`; a scan that reaches
-    /// less may need fewer, and the first such scan prepares that pyramid too.
+    /// Prepares `map` for localising scans in it with `params` (their search parameters,
+    /// their refinement's target preparation). A map finer than `params.search.resolution`
+    /// is prepared at its coarsest pyramid level within that resolution
+    /// ([`working_factor`]; the module doc says why). The search's levels are chosen for
+    /// scans reaching `params.search.max_range`; a scan that reaches less may need fewer,
+    /// and the first such scan prepares that pyramid too.
     ///
     /// # Errors
     /// [`crate::Error::InvalidArgument`] for invalid parameters.
@@ -113,13 +127,21 @@ impl Localizer {
         params: &RegisterParams,
         source: Option<&PointCloud>,
     ) -> Result<Self> {
+        params.search.validate()?;
+        let (map_resolution, voxels) = (map.resolution(), map.len());
+        let factor = working_factor(map_resolution, params.search.resolution);
+        let map = if factor > 1 {
+            map.downsample(factor)?
+        } else {
+            map
+        };
         let search = search_params(params, map.resolution())?;
         let extent = map.stats().bbox.map_or(Vector3::zeros(), |b| b.extent());
         let levels = match source {
             Some(s) => search.levels_for_source(map.resolution(), extent, s),
             None => search.levels_for(extent, search.max_range),
         };
-        let (resolution, voxels) = (map.resolution(), map.len());
+        let resolution = map.resolution();
         let points = map.to_cloud();
         let icp = params
             .refine
@@ -145,16 +167,24 @@ impl Localizer {
             surfaces,
             extent,
             resolution,
+            map_resolution,
             voxels,
         })
     }
 
-    /// The map's voxel edge, metres (the search's finest resolution).
+    /// The voxel edge scans are placed at, metres: the search's finest resolution, that of
+    /// the map's voxel centres ICP refines against and of the agreement counts (the map's
+    /// own voxel edge unless the map is finer than the search's resolution).
     pub fn resolution(&self) -> f64 {
         self.resolution
     }
 
-    /// Voxels in the map.
+    /// The map's own voxel edge, metres.
+    pub fn map_resolution(&self) -> f64 {
+        self.map_resolution
+    }
+
+    /// Voxels in the map as given (at [`Localizer::map_resolution`]).
     pub fn len(&self) -> usize {
         self.voxels
     }
@@ -227,8 +257,30 @@ impl Localizer {
     }
 }
 
-/// `params`' search at the map's `resolution` (the search's finest is the map's; the
-/// parameters say so too, so that their check is of the value in use).
+/// The factor (a power of two) a map of voxel edge `map_resolution` is coarsened by to be
+/// searched at `resolution`: the largest whose coarsened edge does not exceed `resolution`
+/// (1 for a map at or above it). The search's lattice has no use for cells finer than it
+/// was asked for, while a finer map costs more to search, refine against and count in.
+///
+/// ```
+/// use olmap::align::working_factor;
+/// assert_eq!(working_factor(0.025, 0.1), 4);
+/// assert_eq!(working_factor(0.028, 0.1), 2);
+/// assert_eq!(working_factor(0.05, 0.1), 2);
+/// assert_eq!(working_factor(0.1, 0.1), 1);
+/// assert_eq!(working_factor(0.2, 0.1), 1);
+/// ```
+pub fn working_factor(map_resolution: f64, resolution: f64) -> u32 {
+    let mut factor = 1u32;
+    // A relative slack so that 0.05 doubled equals 0.1 despite rounding.
+    while factor < 1 << 16 && map_resolution * f64::from(factor * 2) <= resolution * (1.0 + 1e-9) {
+        factor *= 2;
+    }
+    factor
+}
+
+/// `params`' search at the prepared map's `resolution` (the search's finest is the map's;
+/// the parameters say so too, so that their check is of the value in use).
 fn search_params(params: &RegisterParams, resolution: f64) -> Result<SearchParams> {
     let mut search = params.search.clone();
     search.resolution = resolution;
@@ -237,7 +289,8 @@ fn search_params(params: &RegisterParams, resolution: f64) -> Result<SearchParam
 }
 
 /// Localises a scan in a prior map: [`Localizer::localize`] in a map prepared for this
-/// scan alone (the pyramid its range asks for). [`Registration::seconds`] includes that
+/// scan alone (the pyramid its range asks for; a map finer than `params.search.resolution`
+/// read at its level within that resolution, as [`Localizer::new`] does). [`Registration::seconds`] includes that
 /// preparation. To place many scans in one map, prepare it once with [`Localizer::new`].
 ///
 /// # Errors
@@ -306,5 +359,55 @@ mod tests {
             "kept, not made again"
         );
         assert_eq!(localizer.targets.lock().unwrap().len(), 2);
+    }
+
+    /// A map finer than the search's resolution is localised in as the map coarsened to
+    /// that resolution (the same pose and verdict, exactly), right where trusted; asked for
+    /// its own resolution it is read at its own voxel.
+    #[test]
+    fn a_map_finer_than_the_search_is_read_at_its_level_within_the_search_resolution() {
+        let data = simulate(&SimConfig::demo_lab(5, 1, 10), |_, _| {}).unwrap();
+        let robot = &data.robots[0];
+        let held_out = 4;
+        let mut fine = OccupancyList::new(0.05).unwrap();
+        for (i, (scan, pose)) in robot.scans.iter().zip(&robot.truth).enumerate() {
+            if i != held_out {
+                fine.add_points(scan, pose, 1);
+            }
+        }
+        let params = RegisterParams::default();
+        assert_eq!(params.search.resolution, 0.1);
+        let read_coarse = Localizer::new(fine.clone(), &params).unwrap();
+        assert_eq!(read_coarse.resolution(), 0.1);
+        assert_eq!(read_coarse.map_resolution(), 0.05);
+        assert_eq!(read_coarse.len(), fine.len());
+        let coarse = Localizer::new(fine.downsample(2).unwrap(), &params).unwrap();
+        assert!(coarse.len() < fine.len());
+        let scan = &robot.scans[held_out];
+        let a = read_coarse.localize(scan, &params).unwrap();
+        let b = coarse.localize(scan, &params).unwrap();
+        assert_eq!(a.pose, b.pose);
+        assert_eq!((a.trusted, &a.doubts), (b.trusted, &b.doubts));
+        assert!(a.trusted, "{:?}", a.doubts);
+        let (dt, dr) = pose_error(&a.pose, &robot.truth[held_out]);
+        assert!(dt < 0.1 && dr.to_degrees() < 1.0, "{dt} m, {dr} rad off");
+        let own = RegisterParams {
+            search: SearchParams {
+                resolution: 0.05,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let at_own = Localizer::new(fine.clone(), &own).unwrap();
+        assert_eq!(at_own.resolution(), 0.05);
+        let c = at_own.localize(scan, &own).unwrap();
+        let finest = |r: &Registration| {
+            r.search
+                .levels
+                .iter()
+                .map(|l| l.resolution)
+                .fold(f64::INFINITY, f64::min)
+        };
+        assert_eq!((finest(&a), finest(&c)), (0.1, 0.05));
     }
 }

@@ -27,7 +27,7 @@ pub use consistency::{
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
-pub use localize::{localize, Localizer};
+pub use localize::{localize, working_factor, Localizer};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
     register, register_to, register_to_prepared, register_to_prepared_or_widen, register_to_split,

@@ -158,7 +158,8 @@ impl Locus {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SearchParams {
     /// Finest voxel edge, metres (default 0.1), used to BUILD a target
-    /// ([`super::align_clouds`], [`super::register()`]) and by the level rule
+    /// ([`super::align_clouds`], [`super::register()`]), to choose the level a finer map is
+    /// localised at ([`super::Localizer`], [`super::working_factor`]) and by the level rule
     /// ([`SearchParams::levels_for_source`]). A search takes its finest resolution from its
     /// [`super::SearchTarget`] only ([`super::SearchTarget::resolution`]); there this field
     /// is only checked to be a finite number > 0, so a target built at another resolution
