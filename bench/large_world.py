@@ -9,17 +9,19 @@
    placed poses against the truth after the best rigid fit (ATE; the map frame is the
    first scan's, which registration alone cannot know better than its first match).
 3. `olmap voxelize` fuses every scan but the query scans, at the mapped poses, into the
-   localisation map (--loc-resolution, endpoints): voxels and bytes per voxel.
+   localisation map (--loc-resolution, endpoints; the default 0.025 m holds over 10^7
+   voxels): voxels and bytes per voxel.
 4. `olmap localize --global` localises each query scan (every --query-every th stop, not
-   in the map) with no initial guess, on --threads threads: seconds, peak memory, error
+   in the map) with no initial guess, at --search-resolution (a finer map is read at its
+   pyramid level within it), on --threads threads: seconds, peak memory, error
    against the truth (through the fitted map frame), and whether olmap trusted it. By
    default one process localises every query (`--also`): the map is prepared once, its
    preparation timed apart, and each query's seconds are its own (a localisation
    service); --one-shot runs one process per query, each preparing the map for itself.
 
 Usage: bench/large_world.py [--olmap BIN] [--stops N] [--step MIN,MAX] [--seed S]
-           [--threads T] [--loc-resolution M] [--query-every K] [--one-shot] [--keep DIR]
-           [--json]
+           [--threads T] [--loc-resolution M] [--search-resolution M] [--query-every K]
+           [--one-shot] [--keep DIR] [--json]
 Needs an olmap release build (`cargo build --release`) and GNU time (`/usr/bin/time`).
 """
 
@@ -87,7 +89,10 @@ def main():
     ap.add_argument("--step", default="1.5,2.5", help="metres between stops, MIN,MAX (default 1.5,2.5)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2, help="threads of every step (default 2)")
-    ap.add_argument("--loc-resolution", type=float, default=0.05, help="localisation map voxel, m (default 0.05)")
+    ap.add_argument("--loc-resolution", type=float, default=0.025,
+                    help="localisation map voxel, m (default 0.025: over 10^7 voxels)")
+    ap.add_argument("--search-resolution", type=float, default=0.1,
+                    help="localisation's search resolution, m (default 0.1, olmap's)")
     ap.add_argument("--query-every", type=int, default=100, help="every K-th stop is a query (default 100)")
     ap.add_argument("--one-shot", action="store_true",
                     help="one olmap process per query scan (the map prepared for each)")
@@ -136,14 +141,16 @@ def main():
     vox = json.loads(out)
     rows = []
     prepare_seconds = None
+    res = ["--resolution", str(a.search_resolution)]
     if a.one_shot:
         results = []
         for i in queries:
-            out, peak = timed([a.olmap, "localize", paths[i], big, "--global", "--json"] + th)
+            out, peak = timed([a.olmap, "localize", paths[i], big, "--global", "--json"] + res + th)
             results.append((json.loads(out), peak))
     else:
         also = ["--also"] + [paths[i] for i in queries[1:]] if len(queries) > 1 else []
-        out, peak = timed([a.olmap, "localize", paths[queries[0]], big, "--global", "--json"] + also + th)
+        out, peak = timed([a.olmap, "localize", paths[queries[0]], big, "--global", "--json"]
+                          + also + res + th)
         many = json.loads(out)
         prepare_seconds = many["prepare_seconds"]
         results = [(r, peak) for r in many["results"]]
@@ -169,7 +176,8 @@ def main():
                 "ate_rms_m": ate, "ate_max_m": max(errs), "peak_memory_bytes": map_peak},
         "localisation_map": {k: vox.get(k) for k in ("voxels", "resolution", "bytes_per_voxel", "seconds")}
         | {"peak_memory_bytes": vox_peak},
-        "localisation": rows, "localisation_prepare_seconds": prepare_seconds, "load": load,
+        "localisation": rows, "localisation_prepare_seconds": prepare_seconds,
+        "search_resolution": a.search_resolution, "load": load,
         "folder": tmp if a.keep else None,
     }
     if a.json:
@@ -185,7 +193,8 @@ def main():
     print(f"localisation map ({lm['resolution']} m): {lm['voxels']:,} voxels, "
           f"{lm['bytes_per_voxel']:.1f} bytes per voxel, peak {lm['peak_memory_bytes'] / 2**20:.0f} MiB")
     if prepare_seconds is not None:
-        print(f"  the map prepared once for every query in {prepare_seconds:.2f} s (peak: the whole run's)")
+        print(f"  the map prepared once for every query in {prepare_seconds:.2f} s (peak: the whole run's), "
+              f"searched at {a.search_resolution} m")
     for r in rows:
         print(f"  localise {r['scan']}: {r['seconds']:.2f} s, {r['error_m']:.3f} m / {r['error_deg']:.2f} deg, "
               f"trusted {r['trusted']}, peak {r['peak_memory_bytes'] / 2**20:.0f} MiB")
