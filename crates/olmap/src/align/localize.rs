@@ -25,8 +25,8 @@ use super::icp::IcpTarget;
 use super::register::{finish, refinement_after_search, Against};
 use super::search::global_search;
 use super::target::SearchTarget;
-use super::verify::{starts, upright_starts, MapSurfaces};
-use super::{Alignment, OnWindowEdge, RegisterParams, Registration, SearchParams};
+use super::verify::{starts, upright_look, upright_starts_of, MapSurfaces};
+use super::{Alignment, Candidate, OnWindowEdge, RegisterParams, Registration, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::occupancy::OccupancyList;
@@ -240,7 +240,20 @@ impl Localizer {
         let search_params = search_params(params, resolution)?;
         let levels = search_params.levels_for_source(resolution, self.extent, source);
         let target = self.target(levels)?;
-        let search = global_search(source, &target, &search_params)?;
+        // The upright look's search runs beside the first (the coarse levels of one search
+        // leave a core idle); its starts are taken as `upright_starts` would take them,
+        // and it is wasted only when the first search fails its own tests.
+        let (search, look) = rayon::join(
+            || global_search(source, &target, &search_params),
+            || upright_look(source, &target, &search_params),
+        );
+        let (search, look) = (search?, look?);
+        let upright = |s: &Alignment| -> Result<Vec<Candidate>> {
+            Ok(match &look {
+                Some(look) if s.overlap > 0 => upright_starts_of(look, &search_params, &starts(s)),
+                _ => Vec::new(),
+            })
+        };
         finish(
             source,
             Against {
@@ -250,7 +263,7 @@ impl Localizer {
                 surfaces: Some(&self.surfaces),
             },
             search,
-            &|s: &Alignment| upright_starts(source, &target, &search_params, s, &starts(s)),
+            &upright,
             params,
             start,
             OnWindowEdge::Refine,

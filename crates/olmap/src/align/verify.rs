@@ -409,22 +409,47 @@ pub(super) fn upright_starts(
     search: &Alignment,
     taken: &[Candidate],
 ) -> Result<Vec<Candidate>> {
+    if search.overlap == 0 {
+        return Ok(Vec::new());
+    }
+    Ok(match upright_look(search_source, target, params)? {
+        Some(look) => upright_starts_of(&look, params, taken),
+        None => Vec::new(),
+    })
+}
+
+/// The upright look's search of [`upright_starts`] on its own (`None` where no look is
+/// made: not a global multi-resolution search of a gravity-aligned scan with every
+/// voxel kept), so that a caller may run it beside the first search.
+pub(super) fn upright_look(
+    search_source: &PointCloud,
+    target: &SearchTarget,
+    params: &SearchParams,
+) -> Result<Option<Alignment>> {
     let gravity = matches!(params.dof, Dof::XyYaw | Dof::XyzYaw);
     if !matches!(params.region, Region::Global)
         || params.search != SearchMode::MultiResolution
         || !gravity
         || params.horizontal_share < 1.0
-        || search.overlap == 0
     {
-        return Ok(Vec::new());
+        return Ok(None);
     }
     let upright = SearchParams {
         horizontal_share: UPRIGHT_LOOK_SHARE,
         ..params.clone()
     };
-    let look = global_search(search_source, target, &upright)?;
+    global_search(search_source, target, &upright).map(Some)
+}
+
+/// The starts [`upright_starts`] takes from the upright look's search `look`: its best
+/// [`UPRIGHT_LOOK_STARTS`] poses distinct from `taken` and from each other.
+pub(super) fn upright_starts_of(
+    look: &Alignment,
+    params: &SearchParams,
+    taken: &[Candidate],
+) -> Vec<Candidate> {
     let mut out: Vec<Candidate> = Vec::new();
-    for c in starts(&look) {
+    for c in starts(look) {
         if out.len() == UPRIGHT_LOOK_STARTS {
             break;
         }
@@ -436,7 +461,7 @@ pub(super) fn upright_starts(
             out.push(c);
         }
     }
-    Ok(out)
+    out
 }
 
 /// What the hypotheses are refined and checked against: the target's points (for the
