@@ -242,10 +242,14 @@ impl Localizer {
         let target = self.target(levels)?;
         // The upright look's search runs beside the first (the coarse levels of one search
         // leave a core idle); its starts are taken as `upright_starts` would take them,
-        // and it is wasted only when the first search fails its own tests.
+        // and it is wasted only when the first search fails its own tests. Without a
+        // refinement there is no verification to take them.
         let (search, look) = rayon::join(
             || global_search(source, &target, &search_params),
-            || upright_look(source, &target, &search_params),
+            || match params.refine {
+                Some(_) => upright_look(source, &target, &search_params),
+                None => Ok(None),
+            },
         );
         let (search, look) = (search?, look?);
         let upright = |s: &Alignment| -> Result<Vec<Candidate>> {
