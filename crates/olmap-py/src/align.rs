@@ -264,24 +264,24 @@ pub fn align(
 /// Args:
 ///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.
 ///     map: an OccupancyMap.
-///     resolution: finest voxel edge of the search, metres. Default 0.1. A map finer than
-///         this is read at its pyramid level closest to it without exceeding it (its voxel
-///         edge doubled: a 0.025 m map at 0.1 m); a map at or above it at its own.
 ///     dof, max_tilt, guess, window, search, refine, max_range, threads, levels: as for
 ///         ``align``.
+///     resolution: finest voxel edge of the search, metres. Default 0.1. A map finer than
+///         this is read at its pyramid level closest to it without exceeding it (its voxel
+///         edge doubled as often as that allows: a 0.025 m map at 0.1 m, a 0.03 m map at
+///         0.06 m); a map at or above it at its own.
 ///
 /// Returns:
 ///     Alignment: ``T_target_source`` is ``T_map_scan``.
 #[pyfunction]
-#[pyo3(signature = (scan, map, resolution=0.1, dof="xyz-yaw", max_tilt=15.0, guess=None,
-                    window=None, search="multires", refine=true, max_range=30.0, threads=0,
-                    levels=0))]
+#[pyo3(signature = (scan, map, dof="xyz-yaw", max_tilt=15.0, guess=None, window=None,
+                    search="multires", refine=true, max_range=30.0, threads=0, levels=0,
+                    resolution=0.1))]
 #[allow(clippy::too_many_arguments)]
 pub fn localize(
     py: Python<'_>,
     scan: &Bound<'_, PyAny>,
     map: &Bound<'_, PyOccupancyMap>,
-    resolution: f64,
     dof: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
@@ -291,6 +291,7 @@ pub fn localize(
     max_range: f64,
     threads: i64,
     levels: usize,
+    resolution: f64,
 ) -> PyResult<PyAlignment> {
     let map = map.get();
     let params = register_params(
@@ -311,7 +312,7 @@ pub fn localize(
 ///
 /// Args:
 ///     map: an OccupancyMap.
-///     resolution, dof, max_tilt, search, refine, max_range, levels: as for
+///     dof, max_tilt, search, refine, max_range, levels, resolution: as for
 ///         ``olmap.localize``, kept for every query (a map finer than ``resolution`` is
 ///         prepared at its pyramid level within it).
 ///     threads: threads for the preparation (0: one per core).
@@ -358,13 +359,12 @@ impl QuerySettings {
 #[pymethods]
 impl PyLocalizer {
     #[new]
-    #[pyo3(signature = (map, resolution=0.1, dof="xyz-yaw", max_tilt=15.0, search="multires",
-                        refine=true, max_range=30.0, threads=0, levels=0))]
+    #[pyo3(signature = (map, dof="xyz-yaw", max_tilt=15.0, search="multires", refine=true,
+                        max_range=30.0, threads=0, levels=0, resolution=0.1))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         map: &Bound<'_, PyOccupancyMap>,
-        resolution: f64,
         dof: &str,
         max_tilt: f64,
         search: &str,
@@ -372,6 +372,7 @@ impl PyLocalizer {
         max_range: f64,
         threads: i64,
         levels: usize,
+        resolution: f64,
     ) -> PyResult<Self> {
         let map = map.get();
         let settings = QuerySettings {
@@ -421,7 +422,7 @@ impl PyLocalizer {
         Ok(PyAlignment::new(&r, &s.name(), &self.map_name))
     }
 
-    /// Voxels in the prepared map.
+    /// Voxels in the map as given (at ``map_resolution``).
     fn __len__(&self) -> usize {
         self.inner.len()
     }
@@ -441,8 +442,9 @@ impl PyLocalizer {
 
     fn __repr__(&self) -> String {
         format!(
-            "Localizer({} voxels at {} m, {})",
+            "Localizer({} voxels at {} m, read at {} m, {})",
             self.inner.len(),
+            self.inner.map_resolution(),
             self.inner.resolution(),
             self.map_name
         )

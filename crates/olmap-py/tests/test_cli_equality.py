@@ -121,6 +121,11 @@ def test_a_map_finer_than_the_search_is_read_at_its_level_as_the_cli_does(data, 
     assert_same_alignment(res, report)
     assert_same_alignment(olmap.localize(source, m), report)
     assert res.trusted and abs(res.T_target_source[0, 3] - 3.378) < 0.05
+    # The winner is the upright look's (the search's own best puts scan002 near scan000's
+    # origin, floor on floor): the look runs beside the search in a Localizer.
+    u = report["uniqueness"]
+    assert u["hypotheses"][u["chosen"]]["origin"] == "upright-look"
+    assert "read at 0.1 m" in repr(loc)
     own = olmap.Localizer(m, resolution=0.05)
     assert own.resolution == 0.05
     report = cli("localize", "--json", "--3dtk-valid", "--resolution", "0.05", s2, out)

@@ -35,8 +35,9 @@ pub struct AlignArgs {
     /// What to place it in: a point cloud, or a map (.olm, .bt) for localisation.
     pub target: PathBuf,
     /// Finest voxel edge of the search, metres. A map finer than this is localised in at
-    /// its pyramid level closest to it without exceeding it (its voxel edge doubled: a
-    /// 0.025 m map at 0.1 m), a map at or above it at its own voxel edge.
+    /// its pyramid level closest to it without exceeding it (its voxel edge doubled as
+    /// often as that allows: a 0.025 m map at 0.1 m, a 0.03 m map at 0.06 m), a map at or
+    /// above it at its own voxel edge.
     #[arg(long, default_value_t = 0.1)]
     pub resolution: f64,
     /// Pyramid levels (0: automatic, coarsest at least 16x the finest).

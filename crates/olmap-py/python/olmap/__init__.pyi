@@ -183,7 +183,6 @@ def align(
 def localize(
     scan: Points,
     map: OccupancyMap,
-    resolution: float = 0.1,
     dof: str = "xyz-yaw",
     max_tilt: float = 15.0,
     guess: Optional[Pose] = None,
@@ -193,13 +192,13 @@ def localize(
     max_range: float = 30.0,
     threads: int = 0,
     levels: int = 0,
+    resolution: float = 0.1,
 ) -> Alignment: ...
 class Localizer:
     """A map prepared once for localising many scans in it (see olmap.localize)."""
     def __init__(
         self,
         map: OccupancyMap,
-        resolution: float = 0.1,
         dof: str = "xyz-yaw",
         max_tilt: float = 15.0,
         search: str = "multires",
@@ -207,6 +206,7 @@ class Localizer:
         max_range: float = 30.0,
         threads: int = 0,
         levels: int = 0,
+        resolution: float = 0.1,
     ) -> None: ...
     def localize(
         self,

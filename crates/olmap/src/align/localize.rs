@@ -25,7 +25,7 @@ use super::icp::IcpTarget;
 use super::register::{finish, refinement_after_search, Against};
 use super::search::global_search;
 use super::target::SearchTarget;
-use super::verify::{starts, upright_look, upright_starts_of, MapSurfaces};
+use super::verify::{starts, upright_look, upright_starts, upright_starts_of, MapSurfaces};
 use super::{Alignment, Candidate, OnWindowEdge, RegisterParams, Registration, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -41,7 +41,7 @@ use crate::occupancy::OccupancyList;
 ///
 /// Memory: the map's search pyramid, its voxel centres (12 bytes a voxel), their ICP
 /// index with the normals estimated so far (about 40 bytes a point once asked) and its
-/// surface (8 bytes a surface voxel), all at [`Localizer::resolution`]: 0.5 GB at peak for
+/// surface (8 bytes a surface voxel), all at [`Localizer::resolution`]: 0.6 GB at peak for
 /// a 10.6 M-voxel warehouse map read at 0.1 m (1.8 M voxels there), 1.1 GB for a 5.2
 /// M-voxel one read at its own 0.05 m.
 ///
@@ -113,18 +113,21 @@ impl Localizer {
     /// # Errors
     /// [`crate::Error::InvalidArgument`] for invalid parameters.
     pub fn new(map: OccupancyList, params: &RegisterParams) -> Result<Self> {
-        Self::build(map, params, None)
+        Self::build(Cow::Owned(map), params, None)
     }
 
     /// [`Localizer::new`] for one scan: the pyramid for its levels.
-    fn for_one(map: OccupancyList, params: &RegisterParams, source: &PointCloud) -> Result<Self> {
-        Self::build(map, params, Some(source))
+    fn for_one(map: &OccupancyList, params: &RegisterParams, source: &PointCloud) -> Result<Self> {
+        Self::build(Cow::Borrowed(map), params, Some(source))
     }
 
     /// Everything is made here, before any query: nothing is initialised lazily inside a
     /// query, which may run on a rayon worker that would then wait on itself.
+    /// A borrowed map is copied only when it is read at its own voxel (a finer one is
+    /// read from its coarser level, made from it), and a given one is dropped once that
+    /// level is made.
     fn build(
-        map: OccupancyList,
+        map: Cow<'_, OccupancyList>,
         params: &RegisterParams,
         source: Option<&PointCloud>,
     ) -> Result<Self> {
@@ -134,7 +137,7 @@ impl Localizer {
         let map = if factor > 1 {
             map.downsample(factor)?
         } else {
-            map
+            map.into_owned()
         };
         let search = search_params(params, map.resolution())?;
         let extent = map.stats().bbox.map_or(Vector3::zeros(), |b| b.extent());
@@ -230,7 +233,9 @@ impl Localizer {
     /// voxel centres and the verdict. [`Registration::seconds`] counts this call only,
     /// not the map's preparation. Refinement parameters that prepare a target otherwise
     /// than those given to [`Localizer::new`] (another target voxel, normal source or
-    /// neighbourhood) are served by a preparation for this call alone.
+    /// neighbourhood) are served by a preparation for this call alone. The search runs at
+    /// [`Localizer::resolution`], fixed by [`Localizer::new`] (the query's
+    /// `params.search.resolution` does not choose another level).
     ///
     /// # Errors
     /// [`crate::Error::InvalidArgument`] for invalid parameters.
@@ -240,23 +245,28 @@ impl Localizer {
         let search_params = search_params(params, resolution)?;
         let levels = search_params.levels_for_source(resolution, self.extent, source);
         let target = self.target(levels)?;
-        // The upright look's search runs beside the first (the coarse levels of one search
-        // leave a core idle); its starts are taken as `upright_starts` would take them,
-        // and it is wasted only when the first search fails its own tests. Without a
-        // refinement there is no verification to take them.
+        // With more than one thread the upright look's search runs beside the first (the
+        // coarse levels of one search leave a core idle) and its starts are taken as
+        // `upright_starts` would take them: the same starts, wasted when the first search
+        // fails its own tests and no verification takes them. Without a refinement there
+        // is no verification; on one thread the look waits until one asks for it.
+        let beside = params.refine.is_some() && rayon::current_num_threads() > 1;
         let (search, look) = rayon::join(
             || global_search(source, &target, &search_params),
-            || match params.refine {
-                Some(_) => upright_look(source, &target, &search_params),
-                None => Ok(None),
+            || match beside {
+                true => upright_look(source, &target, &search_params),
+                false => Ok(None),
             },
         );
         let (search, look) = (search?, look?);
         let upright = |s: &Alignment| -> Result<Vec<Candidate>> {
-            Ok(match &look {
-                Some(look) if s.overlap > 0 => upright_starts_of(look, &search_params, &starts(s)),
-                _ => Vec::new(),
-            })
+            match &look {
+                Some(look) if s.overlap > 0 => {
+                    Ok(upright_starts_of(look, &search_params, &starts(s)))
+                }
+                Some(_) => Ok(Vec::new()),
+                None => upright_starts(source, &target, &search_params, s, &starts(s)),
+            }
         };
         finish(
             source,
@@ -276,9 +286,12 @@ impl Localizer {
 }
 
 /// The factor (a power of two) a map of voxel edge `map_resolution` is coarsened by to be
-/// searched at `resolution`: the largest whose coarsened edge does not exceed `resolution`
-/// (1 for a map at or above it). The search's lattice has no use for cells finer than it
-/// was asked for, while a finer map costs more to search, refine against and count in.
+/// searched at `resolution` (both metres, finite and > 0, as a map's and a validated
+/// search's are): the largest whose coarsened edge does not exceed `resolution`, up to a
+/// relative 1e-9 (1 for a map at or above it; at most 2^16, the most
+/// [`OccupancyList::downsample`] takes). The search's lattice has no use for cells finer
+/// than it was asked for, while a finer map costs more to search, refine against and
+/// count in.
 ///
 /// ```
 /// use olmap::align::working_factor;
@@ -308,8 +321,9 @@ fn search_params(params: &RegisterParams, resolution: f64) -> Result<SearchParam
 
 /// Localises a scan in a prior map: [`Localizer::localize`] in a map prepared for this
 /// scan alone (the pyramid its range asks for; a map finer than `params.search.resolution`
-/// read at its level within that resolution, as [`Localizer::new`] does). [`Registration::seconds`] includes that
-/// preparation. To place many scans in one map, prepare it once with [`Localizer::new`].
+/// read at its level within that resolution, as [`Localizer::new`] does).
+/// [`Registration::seconds`] includes that preparation. To place many scans in one map,
+/// prepare it once with [`Localizer::new`].
 ///
 /// # Errors
 /// [`crate::Error::InvalidArgument`] for invalid parameters.
@@ -319,7 +333,7 @@ pub fn localize(
     params: &RegisterParams,
 ) -> Result<Registration> {
     let start = Instant::now();
-    let localizer = Localizer::for_one(map.clone(), params, source)?;
+    let localizer = Localizer::for_one(map, params, source)?;
     let mut r = localizer.localize(source, params)?;
     r.seconds = start.elapsed().as_secs_f64();
     Ok(r)
