@@ -193,6 +193,7 @@ const SWEEP: &[(&str, &[&str])] = &[
     ),
     ("align {b} {a} --threads={v}", INT),
     ("localize {b} {m} --max-range={v}", NUM),
+    ("localize {b} {m} --resolution={v}", NUM),
     ("localize {b} {m} --levels={v}", INT),
     (
         "localize {b} {m} --guess={v},0,0,0,0,0 --window 0.5,0.2,15",
