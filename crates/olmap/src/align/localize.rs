@@ -123,6 +123,7 @@ impl Localizer {
 
     /// Everything is made here, before any query: nothing is initialised lazily inside a
     /// query, which may run on a rayon worker that would then wait on itself.
+    ///
     /// A borrowed map is copied only when it is read at its own voxel (a finer one is
     /// read from its coarser level, made from it), and a given one is dropped once that
     /// level is made.
@@ -253,9 +254,12 @@ impl Localizer {
         let beside = params.refine.is_some() && rayon::current_num_threads() > 1;
         let (search, look) = rayon::join(
             || global_search(source, &target, &search_params),
-            || match beside {
-                true => upright_look(source, &target, &search_params),
-                false => Ok(None),
+            || {
+                if beside {
+                    upright_look(source, &target, &search_params)
+                } else {
+                    Ok(None)
+                }
             },
         );
         let (search, look) = (search?, look?);
