@@ -117,8 +117,9 @@ pub(super) fn finish(
         (on_edge, doubts.is_empty(), params.refine.is_some())
     {
         // Only when every hypothesis the verification would refine starts there: then the
-        // verdict would doubt whichever won (its start on the edge, or a refinement that
-        // reaches the inner part moving farther than it accepts).
+        // verdict would doubt whichever won (its start on the edge), or only a refinement
+        // moving farther than the search's cell (which the verdict holds to a closer
+        // agreement) could reach the inner part.
         // (The first start is the search's best.)
         let shift = params.trust.max_refine_shift_cells * resolution;
         let best = widen_doubts(&search.pose, &params.search, inner, shift);
@@ -168,13 +169,21 @@ pub(super) fn finish(
             doubts.extend(refinement_doubts(
                 &w.start,
                 &w.refinement,
+                w.consistency.agreement(),
                 resolution,
                 params.search.dof,
                 &params.trust,
             ));
             doubts.extend(agreement_doubts(&w.consistency, &params.trust));
             doubts.extend(upright_look_doubts(w, &params.trust));
-            doubts.extend(window_doubts(&w.start.pose, &params.search));
+            let mut edge = window_doubts(&w.start.pose, &params.search);
+            let moved = (w.pose().translation() - w.start.pose.translation()).norm();
+            if edge.is_empty() && moved > params.trust.max_refine_shift_cells * resolution {
+                // A refinement that moved farther than the search's cell may have left the
+                // window the search kept to.
+                edge = window_doubts(&w.pose(), &params.search);
+            }
+            doubts.extend(edge);
             (w.pose(), Some(w.refinement.clone()), Some(w.consistency))
         }
         None => (search.pose, None, None),
@@ -250,8 +259,8 @@ pub enum OnWindowEdge {
     #[default]
     Refine,
     /// Skip the refinement and the verification when the search's best pose lies on the
-    /// window's edge, or so far from the prior in x or y that no refinement the verdict
-    /// accepts ([`super::TrustThresholds::max_refine_shift_cells`]) could bring it within
+    /// window's edge, or so far from the prior in x or y that no refinement moving it by at
+    /// most [`super::TrustThresholds::max_refine_shift_cells`] could bring it within
     /// `inner` times the window's half-width (`inner` = 1: the edge alone): the result is
     /// the search's, untrusted, with the reason as its doubt. For a caller that searches a
     /// wider window next and trusts only a match in the inner part of a window (the
