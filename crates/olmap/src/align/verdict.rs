@@ -51,7 +51,7 @@
 //!    inliers, and ended within `max_refine_shift_cells` cells of the search's pose, or,
 //!    farther, at a pose where the scans agree at `min_upright_agreement`. The search scores
 //!    voxel overlap on a lattice, and where things repeat along a corridor its best can lie
-//!    0.5-1 m from the optimum ICP reaches from a nearby start (simulated corridor ring,
+//!    0.4-1 m from the optimum ICP reaches from a nearby start (simulated corridor ring,
 //!    thesis-degraded odometry: the search's best 1 m off at agreement 0.896, the refined
 //!    pose 1 cm from the truth at 0.999, the search's lattice scoring it 2.4 % below its
 //!    best): a refined pose the search did not propose is a second look, held to the same
