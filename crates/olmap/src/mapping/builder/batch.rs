@@ -107,7 +107,7 @@ pub(super) fn place_best_first(
             }
             break;
         };
-        let Some(chosen) = batch.confirm(s)? else {
+        let Some(chosen) = batch.confirm(s, placing.placed.len())? else {
             continue;
         };
         let r = &chosen.registration;
@@ -286,25 +286,39 @@ impl Batch<'_, '_> {
         Ok(best)
     }
 
-    /// Takes the chosen scan's cached result; a provisional one is confirmed by a window
-    /// search first, and one that fails goes back to the cache (`None`: choose again).
-    fn confirm(&mut self, s: usize) -> Result<Option<Candidate>> {
+    /// Takes the chosen scan's cached result (`placed_now` scans placed); a provisional one
+    /// is confirmed by a window search first, a global match found against a smaller map by
+    /// a global search, and one that fails goes back to the cache (`None`: choose again).
+    fn confirm(&mut self, s: usize, placed_now: usize) -> Result<Option<Candidate>> {
         let c = self.pending[s]
             .cached
             .take()
             .expect("chosen from the cache");
+        let provisional = std::mem::take(&mut self.pending[s].provisional);
         // A scan placed by a two-way sighting alone has nothing the map could confirm.
-        if !self.pending[s].provisional || matches!(c.via, Placement::MutualSighting { .. }) {
-            self.pending[s].provisional = false;
+        if matches!(c.via, Placement::MutualSighting { .. }) {
             return Ok(Some(c));
         }
-        self.pending[s].provisional = false;
-        let confirmed = self.state.register_near(s, c.registration.pose)?;
-        let checked = Candidate {
-            footprint: footprint(self.state.cloud(s), &confirmed.pose),
-            registration: confirmed,
-            via: c.via,
-        };
+        // A global match is confirmed globally once the map has grown: the place where the
+        // scan truly is may have been mapped since, anywhere, and a window round the cached
+        // pose cannot see it (simulated office seed 1, robot 2 without odometry: scan003's
+        // match against a smaller map was a look-alike 5.06 m away and turned 180°, which a
+        // window confirmed after the map grew, while a global search against the grown
+        // map finds the truth and trusts it).
+        let checked =
+            if matches!(c.via, Placement::Global) && self.pending[s].attempted_at < placed_now {
+                self.pending[s].attempted_at = placed_now;
+                attempt(self.state, s, true)?
+            } else if provisional {
+                let confirmed = self.state.register_near(s, c.registration.pose)?;
+                Candidate {
+                    footprint: footprint(self.state.cloud(s), &confirmed.pose),
+                    registration: confirmed,
+                    via: c.via,
+                }
+            } else {
+                return Ok(Some(c));
+            };
         if !checked.registration.trusted {
             self.pending[s].cached = Some(checked);
             return Ok(None);
