@@ -954,11 +954,37 @@ fn near_box(source: &PointCloud, pose: &Pose, reach: f64) -> Option<Aabb> {
     Some(Aabb::new(b.min - m, b.max + m))
 }
 
+/// A hypothesis refined from `start` to `end` whose two sides together count `supported`
+/// and `contradicted` voxels (all on the scan's side), for tests here and in
+/// [`super::verdict`].
+#[cfg(test)]
+pub(crate) fn counted_hypothesis(
+    start: Candidate,
+    end: Pose,
+    supported: u64,
+    contradicted: u64,
+) -> Hypothesis {
+    let consistency = Consistency {
+        source: crate::align::consistency::SideAgreement {
+            supported,
+            contradicted,
+            ..Default::default()
+        },
+        target: None,
+        resolution: 0.05,
+    };
+    Hypothesis {
+        start,
+        origin: Origin::Search,
+        refinement: IcpResult::at(end, true),
+        consistency,
+        fit: fit(&consistency),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::align::consistency::SideAgreement;
-    use crate::align::icp::IcpResult;
 
     fn pose(x: f64, yaw_deg: f64) -> Pose {
         Pose::from_xyz_ypr(x, 0.0, 0.0, yaw_deg.to_radians(), 0.0, 0.0)
@@ -972,26 +998,7 @@ mod tests {
         }
     }
 
-    /// A hypothesis refined from `start` to `end` whose two sides together count
-    /// `supported` and `contradicted` voxels (all on the scan's side).
-    fn hypothesis(start: Candidate, end: Pose, supported: u64, contradicted: u64) -> Hypothesis {
-        let consistency = Consistency {
-            source: SideAgreement {
-                supported,
-                contradicted,
-                ..Default::default()
-            },
-            target: None,
-            resolution: 0.05,
-        };
-        Hypothesis {
-            start,
-            origin: Origin::Search,
-            refinement: IcpResult::at(end, true),
-            consistency,
-            fit: fit(&consistency),
-        }
-    }
+    use super::counted_hypothesis as hypothesis;
 
     fn search(candidates: Vec<Candidate>, ambiguity: usize) -> Alignment {
         Alignment {

@@ -92,6 +92,14 @@ pub struct TrustRow {
     /// ([`crate::align::verify::unverified_look_alikes`]).
     #[serde(default)]
     pub unverified: usize,
+    /// How many standard deviations fewer contradicted voxels the cleanest distinct rival
+    /// supported at least half as well has than the winner
+    /// ([`crate::align::verify::Verification::cleaner_rival`]; `None` without one).
+    #[serde(default)]
+    pub cleaner_rival_sigma: Option<f64>,
+    /// That rival's supported voxels over the winner's (`None` without one).
+    #[serde(default)]
+    pub cleaner_rival_support: Option<f64>,
     /// The verdict's doubts.
     pub doubts: Vec<String>,
     /// Seconds of the registration.
@@ -165,6 +173,14 @@ pub fn run_trust(
             (true, _) => Outcome::TrustedWrong,
         };
         let errors = c.truth.map(|t| pose_error(&r.pose, &t));
+        // The cleanest rival supported half as well: its σ, and its support over the winner's.
+        let cleaner = r.verification.as_ref().and_then(|v| {
+            let w = v.winner().supported() as f64;
+            v.cleaner_rival().map(|(i, z)| {
+                let support = (w > 0.0).then(|| v.hypotheses[i].supported() as f64 / w);
+                (z, support)
+            })
+        });
         rows.push(TrustRow {
             name: c.name.clone(),
             scene: c.scene.name().into(),
@@ -180,6 +196,8 @@ pub fn run_trust(
             agreement: r.consistency.map(|c| c.agreement()),
             ambiguity: r.search.ambiguity,
             unverified: r.verification.as_ref().map_or(0, |v| v.unverified.total()),
+            cleaner_rival_sigma: cleaner.map(|c| c.0),
+            cleaner_rival_support: cleaner.and_then(|c| c.1),
             doubts: r.doubts.clone(),
             seconds: r.seconds,
         });
