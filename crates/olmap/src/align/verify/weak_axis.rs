@@ -21,7 +21,10 @@
 //! counted by `consistency::QuickFit` (the source side of the agreement, on the finest
 //! level, at a fraction of its cost); the [`WEAK_AXIS_BY_FIT`] positions with the best
 //! quick fit and the [`WEAK_AXIS_BY_AGREEMENT`] cleanest one (fewest contradicted voxels
-//! per supported one), each at least [`WEAK_AXIS_SEPARATION`] from the others and from
+//! per supported one) of the scan as placed and of it turned (in a corridor the turned
+//! copy laid over the other scan near its sensor can contradict nothing and outshine the
+//! truth farther along as placed: simulated office seed 4, robot 3, scan003 onto
+//! scan000), each at least [`WEAK_AXIS_SEPARATION`] from the others and from
 //! every hypothesis already verified, become hypotheses of their own, refined and counted
 //! like the search's ([`super`]). Either the truth then wins, or a look-alike that fits
 //! about as well becomes the distinct runner-up, or the truth — farther along, overlapping
@@ -58,9 +61,9 @@ pub const WEAK_AXIS_BY_FIT: usize = 2;
 
 /// Positions along the weak direction with the fewest contradicted voxels per supported
 /// one (supported at least [`CLEANER_MIN_SUPPORT`] as well as the winner) that become
-/// hypotheses besides: the truth seen from farther along a corridor overlaps less than a
-/// look-alike but contradicts nothing, and only such a hypothesis lets the verdict's
-/// cleaner-rival test see it.
+/// hypotheses besides, of the scan as placed and of it turned end for end each: the truth
+/// seen from farther along a corridor overlaps less than a look-alike but contradicts
+/// nothing, and only such a hypothesis lets the verdict's cleaner-rival test see it.
 pub const WEAK_AXIS_BY_AGREEMENT: usize = 1;
 
 /// The farthest slide tried each way (metres); below it, the scan's own length along the
@@ -141,15 +144,19 @@ pub(super) fn slide_starts(
         .max_by(|a, b| a.1.cmp(&b.1).then(b.0.abs().cmp(&a.0.abs())))
         .map_or(0, |(j, _)| j);
     let turned = across(lateral);
+    // Every position, and whether it is of the turned copy.
     let mut poses: Vec<Pose> = Vec::new();
+    let mut is_turned: Vec<bool> = Vec::new();
     for k in -steps..=steps {
         let along = axis * (k as f64 * res);
         if k != 0 {
             poses.push(Pose::from_translation(along) * *from);
+            is_turned.push(false);
         }
         for j in -1..=1 {
             let shift = along + side * (f64::from(j) * res);
             poses.push(Pose::from_translation(shift) * turned);
+            is_turned.push(true);
         }
     }
     let counts: Vec<(u64, u64)> = poses.par_iter().map(|p| quick.at(target, p)).collect();
@@ -163,18 +170,29 @@ pub(super) fn slide_starts(
         (a.translation() - b.translation()).norm() < WEAK_AXIS_SEPARATION
             && a.rotation().angle_to(&b.rotation()) <= DISTINCT_ROTATION
     };
-    // The cleanest positions: the fewest contradicted voxels per supported one, among those
-    // supported at least half as well as the winner (as the verdict's cleaner-rival test).
+    // The cleanest positions of each copy (as placed, turned): the fewest contradicted
+    // voxels per supported one, among those supported at least half as well as the winner
+    // (as the verdict's cleaner-rival test). Per copy, because where the turned copy lies
+    // on the other scan near its sensor and contradicts nothing, it would always be the
+    // cleanest and hide the truth farther along unturned (or the other way round).
     let (won_supported, _) = quick.at(target, from);
     let floor = CLEANER_MIN_SUPPORT * won_supported as f64;
     let rate = |i: usize| counts[i].1 as f64 / counts[i].0.max(1) as f64;
-    let mut clean: Vec<usize> = (0..poses.len())
-        .filter(|&i| counts[i].0 as f64 >= floor && counts[i].0 > 0)
-        .collect();
-    clean.sort_by(|&a, &b| rate(a).total_cmp(&rate(b)).then(a.cmp(&b)));
+    let cleanest = |turned: bool| {
+        let mut clean: Vec<usize> = (0..poses.len())
+            .filter(|&i| is_turned[i] == turned && counts[i].0 as f64 >= floor && counts[i].0 > 0)
+            .collect();
+        clean.sort_by(|&a, &b| rate(a).total_cmp(&rate(b)).then(a.cmp(&b)));
+        clean
+    };
+    let (clean_placed, clean_turned) = (cleanest(false), cleanest(true));
     let mut kept: Vec<Pose> = taken.to_vec();
     let mut out = Vec::new();
-    for (ranked, quota) in [(&order, WEAK_AXIS_BY_FIT), (&clean, WEAK_AXIS_BY_AGREEMENT)] {
+    for (ranked, quota) in [
+        (&order, WEAK_AXIS_BY_FIT),
+        (&clean_placed, WEAK_AXIS_BY_AGREEMENT),
+        (&clean_turned, WEAK_AXIS_BY_AGREEMENT),
+    ] {
         let mut taken_here = 0;
         for &i in ranked.iter() {
             if taken_here == quota {
