@@ -173,9 +173,26 @@ fn office_robot_mapped_without_odometry_places_no_scan_wrong(seed: u64, robot: u
 /// trusted (it was, 2.0 m and 180° off, and the robot's map placed the scan there).
 #[test]
 fn a_corridor_scan_turned_end_for_end_is_not_trusted_over_the_truth_along_the_corridor() {
+    corridor_truth_is_verified_and_no_wrong_match_trusted(4);
+}
+
+/// The same pair in the office of seed 11: the truth lies 4.69 m along the corridor from
+/// the winner and turned end for end, and overlaps less (0.46 of the winner's support in
+/// the slides' quick count, 0.60 in the verdict's). While the slides asked the verdict's
+/// 0.5 of a position before ranking its cleanness, the truth was never proposed and the
+/// winner was trusted 4.69 m and 180° off (the robot's map placed the scan there); the
+/// slides now rank positions supported 0.4 as well (`weak_axis::SLIDE_MIN_SUPPORT`).
+#[test]
+fn a_corridor_truth_overlapping_less_than_the_winner_is_still_proposed() {
+    corridor_truth_is_verified_and_no_wrong_match_trusted(11);
+}
+
+/// Robot 3's scan003 aligned onto its scan000 in the simulated office of `seed`: some
+/// hypothesis lies within 0.3 m and 3° of the truth, and a trusted answer is right.
+fn corridor_truth_is_verified_and_no_wrong_match_trusted(seed: u64) {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("o");
-    simulate_office_team(4, &o);
+    simulate_office_team(seed, &o);
     let scans = o.join("robot3").join("scans");
     let out = ok(&olmap(&[
         "align",
@@ -208,14 +225,14 @@ fn a_corridor_scan_turned_end_for_end_is_not_trusted_over_the_truth_along_the_co
         });
     assert!(
         near_truth,
-        "no hypothesis near the truth: {}",
+        "seed {seed}: no hypothesis near the truth: {}",
         v["uniqueness"]
     );
     let (et, er) = error(&registered_pose(&v), &truth);
     if v["trusted"].as_bool().unwrap() {
         assert!(
             et <= 0.3 && er <= 3.0,
-            "trusted but {et:.2} m and {er:.1}° off"
+            "seed {seed}: trusted but {et:.2} m and {er:.1}° off"
         );
     }
 }
