@@ -22,16 +22,15 @@
 //! level, at a fraction of its cost); the [`WEAK_AXIS_BY_FIT`] positions with the best
 //! quick fit and the [`WEAK_AXIS_BY_AGREEMENT`] cleanest one (fewest contradicted voxels
 //! per supported one, among those supported at least [`SLIDE_MIN_SUPPORT`] as well as the
-//! winner) of the scan as placed and of it turned (in a corridor the turned
-//! copy laid over the other scan near its sensor can contradict nothing and outshine the
-//! truth farther along as placed: simulated office seed 4, robot 3, scan003 onto
-//! scan000), each at least [`WEAK_AXIS_SEPARATION`] from the others and from
-//! every hypothesis already verified, become hypotheses of their own, refined and counted
-//! like the search's ([`super`]). Either the truth then wins, or a look-alike that fits
-//! about as well becomes the distinct runner-up, or the truth — farther along, overlapping
-//! less, contradicting nothing — becomes the cleaner rival
-//! ([`super::Verification::cleaner_rival`]) and the verdict doubts the match: all better
-//! than a trusted pose metres off.
+//! winner) of the scan as placed and of it turned (in a corridor the turned copy laid over
+//! the other scan near its sensor can contradict nothing and outshine the truth farther
+//! along as placed: simulated office seed 4, robot 3, scan003 onto scan000), each at least
+//! [`WEAK_AXIS_SEPARATION`] from the others and from every hypothesis already verified,
+//! become hypotheses of their own, refined and counted like the search's ([`super`]).
+//! Either the truth then wins, or a look-alike that fits about as well becomes the
+//! distinct runner-up, or the truth — farther along, overlapping less, contradicting
+//! nothing — becomes the cleaner rival ([`super::Verification::cleaner_rival`]) and the
+//! verdict doubts the match: all better than a trusted pose metres off.
 //!
 //! Cost: only global searches whose winner is weakly held pay it (no real pair of the
 //! shared data does); on the corridor kinds of the trust suite it about doubles a
@@ -68,13 +67,13 @@ pub const WEAK_AXIS_BY_FIT: usize = 2;
 pub const WEAK_AXIS_BY_AGREEMENT: usize = 1;
 
 /// The least support, as a share of the winner's, of a position ranked among the cleanest
-/// ([`WEAK_AXIS_BY_AGREEMENT`]). Below the verdict's [`super::CLEANER_MIN_SUPPORT`] (0.5), because
-/// the quick count sees only the scan's side on the finest level, where the share of a
-/// position overlapping less is smaller than in the verdict's counts of both sides: the
-/// truth along a corridor of the simulated office (seed 11, robot 3, scan003 onto scan000,
-/// 4.69 m along and turned) had 0.46 of the winner's support in the quick count and 0.60
-/// in the verdict's. Proposing a position is not trusting it: the verdict still asks 0.5 of
-/// the refined hypothesis.
+/// ([`WEAK_AXIS_BY_AGREEMENT`]). Below the verdict's [`super::CLEANER_MIN_SUPPORT`] (0.5),
+/// because the quick count sees only the scan's side on the finest level, where the share
+/// of a position overlapping less is smaller than in the verdict's counts of both sides:
+/// the truth along a corridor of the simulated office (seed 11, robot 3, scan003 onto
+/// scan000, 4.69 m along and turned) had 0.46 of the winner's support in the quick count
+/// and 0.60 in the verdict's. Proposing a position is not trusting it: the verdict still
+/// asks 0.5 of the refined hypothesis.
 pub const SLIDE_MIN_SUPPORT: f64 = 0.4;
 
 /// The farthest slide tried each way (metres); below it, the scan's own length along the
@@ -183,9 +182,10 @@ pub(super) fn slide_starts(
     };
     // The cleanest positions of each copy (as placed, turned): the fewest contradicted
     // voxels per supported one, among those supported at least `SLIDE_MIN_SUPPORT` as well
-    // as the winner (a little below the verdict's cleaner-rival test). Per copy, because where the turned copy lies
-    // on the other scan near its sensor and contradicts nothing, it would always be the
-    // cleanest and hide the truth farther along unturned (or the other way round).
+    // as the winner (a little below the verdict's cleaner-rival test). Per copy, because
+    // where the turned copy lies on the other scan near its sensor and contradicts nothing,
+    // it would always be the cleanest and hide the truth farther along unturned (or the
+    // other way round).
     let (won_supported, _) = quick.at(target, from);
     let floor = SLIDE_MIN_SUPPORT * won_supported as f64;
     let rate = |i: usize| counts[i].1 as f64 / counts[i].0.max(1) as f64;
