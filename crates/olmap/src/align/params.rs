@@ -223,8 +223,10 @@ pub struct SearchParams {
     /// than at the truth (wall and furniture hits). What is kept still fixes the height.
     /// Six-degree-of-freedom searches keep every voxel (horizontal surfaces fix roll and
     /// pitch). With the default, a registration over every pose also runs the search a
-    /// second time at 0.1 (the *upright look*) and verifies its best poses beside the
-    /// first's, the fit choosing ([`super::verify::Origin::UprightLook`]).
+    /// second time at 0.1 (the *upright look*; a six-degree-of-freedom one at the prior's
+    /// roll and pitch, a search finer than 0.1 m from its 0.1 m level) and verifies its
+    /// best poses beside the first's, the fit choosing
+    /// ([`super::verify::Origin::UprightLook`]).
     pub horizontal_share: f64,
     /// The most work the exact search may do, in voxel bounds (a node bounded over one scan
     /// voxel; default [`super::EXACT_MAX_WORK`]): past it the search stops with

@@ -399,10 +399,11 @@ pub(super) fn starts(search: &Alignment) -> Vec<Candidate> {
 /// The upright look of a search over every pose: the same search again with the scan's
 /// floor and ceiling voxels thinned to [`UPRIGHT_LOOK_SHARE`] of those scored, whose best
 /// poses ([`UPRIGHT_LOOK_STARTS`], not the same solution as one of `taken`) the
-/// verification refines besides the search's own. Empty for a window or locus search, a
-/// six-degree-of-freedom search, an exact or exhaustive search (the look would double its
-/// minutes), a search that already thins its horizontal surfaces, or one that found no
-/// overlap.
+/// verification refines besides the search's own. Empty for a window or locus search, an
+/// exact or exhaustive search (the look would double its minutes), a search that already
+/// thins its horizontal surfaces, or one that found no overlap. A six-degree-of-freedom
+/// search looks at the prior's roll and pitch (x, y, z and heading); ICP then refines
+/// the tilt of the look's poses.
 ///
 /// Why: the overlap counts voxels, and a scan's voxels are densest on the floor and
 /// ceiling around its own sensor. Two scans taken 1-3 m apart in a furnished room then
@@ -430,24 +431,30 @@ pub(super) fn upright_starts(
 }
 
 /// The upright look's search of [`upright_starts`] on its own (`None` where no look is
-/// made: not a global multi-resolution search of a gravity-aligned scan with every
-/// voxel kept), so that a caller may run it beside the first search. A target finer than
+/// made: not a global multi-resolution search with every voxel kept), so that a caller
+/// may run it beside the first search. A target finer than
 /// [`UPRIGHT_LOOK_FINEST`] is looked at from its coarsest level within it.
 pub(super) fn upright_look(
     search_source: &PointCloud,
     target: &SearchTarget,
     params: &SearchParams,
 ) -> Result<Option<Alignment>> {
-    let gravity = matches!(params.dof, Dof::XyYaw | Dof::XyzYaw);
     if !matches!(params.region, Region::Global)
         || params.search != SearchMode::MultiResolution
-        || !gravity
         || params.horizontal_share < 1.0
     {
         return Ok(None);
     }
+    // A six-degree-of-freedom search looks at the prior's roll and pitch: its floors are
+    // told from its walls only there, and ICP then refines the tilt of the look's poses
+    // with the rest.
+    let dof = match params.dof {
+        Dof::SixDof { .. } => Dof::XyzYaw,
+        gravity => gravity,
+    };
     let upright = SearchParams {
         horizontal_share: UPRIGHT_LOOK_SHARE,
+        dof,
         ..params.clone()
     };
     match upright_look_level(target) {
