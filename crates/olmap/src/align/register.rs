@@ -13,7 +13,8 @@ use super::verdict::{
     upright_look_doubts, window_doubts, TrustThresholds,
 };
 use super::verify::{
-    starts, upright_starts, verify, GlobalChecks, MapSurfaces, RefineAgainst, Verification,
+    starts, upright_look, upright_starts, upright_starts_of, verify, GlobalChecks, MapSurfaces,
+    RefineAgainst, Verification,
 };
 use super::{levels_for_clouds, SearchParams};
 use crate::cloud::PointCloud;
@@ -214,10 +215,52 @@ pub fn register(
     params.search.validate()?;
     let levels = levels_for_clouds(source, target, &params.search);
     let t = SearchTarget::from_cloud(target, params.search.resolution, levels)?;
-    let mut r = register_to(source, &t, target, params)?;
+    let mut r = register_looking_beside(source, &t, target, params)?;
     // The whole registration, the target's preparation included.
     r.seconds = start.elapsed().as_secs_f64();
     Ok(r)
+}
+
+/// [`register_to`] with the upright look's search ([`upright_look`]) run beside the first
+/// search when more than one thread is free and a refinement will verify its poses: the
+/// first search's coarse levels leave a core idle, and the look would otherwise run after
+/// it. The same starts as [`upright_starts`] takes, so the same result (a look whose first
+/// search fails its own tests is wasted: a one-shot registration is not a mapper's many
+/// hopeless tries).
+fn register_looking_beside(
+    source: &PointCloud,
+    target: &SearchTarget,
+    refine_target: &PointCloud,
+    params: &RegisterParams,
+) -> Result<Registration> {
+    if params.refine.is_none() || rayon::current_num_threads() < 2 {
+        return register_to(source, target, refine_target, params);
+    }
+    let start = Instant::now();
+    let (search, look) = rayon::join(
+        || global_search(source, target, &params.search),
+        || upright_look(source, target, &params.search),
+    );
+    let (search, look) = (search?, look?);
+    finish(
+        source,
+        Against {
+            target,
+            points: &|| Cow::Borrowed(refine_target),
+            prepared: None,
+            surfaces: None,
+        },
+        search,
+        &|s: &Alignment| {
+            Ok(match &look {
+                Some(look) if s.overlap > 0 => upright_starts_of(look, &params.search, &starts(s)),
+                _ => Vec::new(),
+            })
+        },
+        params,
+        start,
+        OnWindowEdge::Refine,
+    )
 }
 
 /// [`register`] against a prepared search target (e.g. a growing map), refining against
