@@ -25,7 +25,7 @@ use super::icp::IcpTarget;
 use super::register::{finish, refinement_after_search, Against};
 use super::search::global_search;
 use super::target::SearchTarget;
-use super::verify::{starts, upright_look, upright_starts, upright_starts_of, MapSurfaces};
+use super::verify::{upright_look, upright_starts, upright_starts_after, MapSurfaces};
 use super::{Alignment, Candidate, OnWindowEdge, RegisterParams, Registration, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
@@ -265,11 +265,8 @@ impl Localizer {
         let (search, look) = (search?, look?);
         let upright = |s: &Alignment| -> Result<Vec<Candidate>> {
             match &look {
-                Some(look) if s.overlap > 0 => {
-                    Ok(upright_starts_of(look, &search_params, &starts(s)))
-                }
-                Some(_) => Ok(Vec::new()),
-                None => upright_starts(source, &target, &search_params, s, &starts(s)),
+                Some(look) => Ok(upright_starts_after(look, &search_params, s)),
+                None => upright_starts(source, &target, &search_params, s),
             }
         };
         finish(

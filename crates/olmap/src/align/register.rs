@@ -13,7 +13,7 @@ use super::verdict::{
     upright_look_doubts, window_doubts, TrustThresholds,
 };
 use super::verify::{
-    starts, upright_look, upright_starts, upright_starts_of, verify, GlobalChecks, MapSurfaces,
+    starts, upright_look, upright_starts, upright_starts_after, verify, GlobalChecks, MapSurfaces,
     RefineAgainst, Verification,
 };
 use super::{levels_for_clouds, SearchParams};
@@ -252,10 +252,9 @@ fn register_looking_beside(
         },
         search,
         &|s: &Alignment| {
-            Ok(match &look {
-                Some(look) if s.overlap > 0 => upright_starts_of(look, &params.search, &starts(s)),
-                _ => Vec::new(),
-            })
+            Ok(look
+                .as_ref()
+                .map_or_else(Vec::new, |l| upright_starts_after(l, &params.search, s)))
         },
         params,
         start,
@@ -413,7 +412,7 @@ pub(crate) fn register_preparing<'p>(
             surfaces: None,
         },
         search,
-        &|s: &Alignment| upright_starts(search_source, target, &params.search, s, &starts(s)),
+        &|s: &Alignment| upright_starts(search_source, target, &params.search, s),
         params,
         start,
         on_edge,

@@ -398,8 +398,8 @@ pub(super) fn starts(search: &Alignment) -> Vec<Candidate> {
 
 /// The upright look of a search over every pose: the same search again with the scan's
 /// floor and ceiling voxels thinned to [`UPRIGHT_LOOK_SHARE`] of those scored, whose best
-/// poses ([`UPRIGHT_LOOK_STARTS`], not the same solution as one of `taken`) the
-/// verification refines besides the search's own. Empty for a window or locus search, an
+/// poses ([`UPRIGHT_LOOK_STARTS`], not the same solution as one of the search's own
+/// starts) the verification refines besides the search's own. Empty for a window or locus search, an
 /// exact or exhaustive search (the look would double its minutes), a search that already
 /// thins its horizontal surfaces, or one that found no overlap. A six-degree-of-freedom
 /// search looks at the prior's roll and pitch (x, y, z and heading); ICP then refines
@@ -419,15 +419,28 @@ pub(super) fn upright_starts(
     target: &SearchTarget,
     params: &SearchParams,
     search: &Alignment,
-    taken: &[Candidate],
 ) -> Result<Vec<Candidate>> {
     if search.overlap == 0 {
         return Ok(Vec::new());
     }
     Ok(match upright_look(search_source, target, params)? {
-        Some(look) => upright_starts_of(&look, params, taken),
+        Some(look) => upright_starts_after(&look, params, search),
         None => Vec::new(),
     })
+}
+
+/// The starts [`upright_starts`] takes for `search` from its upright look searched
+/// beforehand (`look`, from [`upright_look`], run beside the search): none when the search
+/// found no overlap.
+pub(super) fn upright_starts_after(
+    look: &Alignment,
+    params: &SearchParams,
+    search: &Alignment,
+) -> Vec<Candidate> {
+    if search.overlap == 0 {
+        return Vec::new();
+    }
+    upright_starts_of(look, params, &starts(search))
 }
 
 /// The upright look's search of [`upright_starts`] on its own (`None` where no look is
@@ -483,9 +496,9 @@ fn upright_look_level(target: &SearchTarget) -> usize {
         .unwrap_or(0)
 }
 
-/// The starts [`upright_starts`] takes from the upright look's search `look`: its best
+/// The starts taken from the upright look's search `look`: its best
 /// [`UPRIGHT_LOOK_STARTS`] poses distinct from `taken` and from each other.
-pub(super) fn upright_starts_of(
+fn upright_starts_of(
     look: &Alignment,
     params: &SearchParams,
     taken: &[Candidate],
