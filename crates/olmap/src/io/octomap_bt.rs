@@ -213,6 +213,20 @@ impl BtLeaves {
             .fold(0u64, |sum, l| sum.saturating_add(l.volume()))
     }
 
+    /// The free leaves (when kept) as boxes of voxel keys, each its lowest and highest
+    /// corner voxel (a leaf at depth `d` is a cube of `2^(16-d)` voxels a side), in the
+    /// file's order.
+    pub fn free_boxes(&self) -> impl Iterator<Item = (VoxelKey, VoxelKey)> + '_ {
+        self.free.iter().map(|leaf| {
+            let (corner, edge) = leaf.corner_and_edge();
+            let key = |d: u32| {
+                let k = corner.map(|c| (c + d) as i32 - KEY_OFFSET);
+                VoxelKey::new(k[0], k[1], k[2])
+            };
+            (key(0), key(edge - 1))
+        })
+    }
+
     /// Compares the classification of two trees of one resolution voxel by voxel, without
     /// expanding either (the leaves sorted in Morton order, then swept together). Trees
     /// whose resolutions differ by more than one part in a million (OctoMap writes `res`

@@ -3,6 +3,7 @@
 use std::io::BufRead;
 use std::path::Path;
 
+use super::free::FreeSpace;
 use super::list::OccupancyList;
 use crate::error::{Error, ParseError, Result};
 use crate::io::octomap_bt::{self, BtStats};
@@ -57,6 +58,10 @@ pub struct LoadedMap {
     pub format: MapFormat,
     /// For `.bt` files: the tree's node and leaf counts.
     pub bt: Option<BtStats>,
+    /// The free space the file keeps (a `.bt` tree's free leaves), `None` when it keeps
+    /// none: a localisation in the map checks scans against it
+    /// ([`crate::align::Localizer::with_free_space`]).
+    pub free: Option<FreeSpace>,
 }
 
 /// The most voxels a `.bt` file may expand to when read: 2^24 = 16,777,216, one occupied
@@ -85,17 +90,20 @@ pub fn read_map(path: impl AsRef<Path>) -> Result<LoadedMap> {
 
 /// Reads a map of a known format from a stream (no file name needed): what [`read_map`]
 /// does once it has opened the file. A `.bt` tree is expanded to at most
-/// [`MAX_BT_VOXELS`] voxels.
+/// [`MAX_BT_VOXELS`] voxels; its free leaves, if any, are kept as the map's free space
+/// ([`LoadedMap::free`]), unexpanded.
 pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedMap, ParseError> {
     match format {
         MapFormat::Olm => Ok(LoadedMap {
             map: OccupancyList::read_olm(reader)?,
             format,
             bt: None,
+            free: None,
         }),
         MapFormat::OctomapBt => {
-            // Expanded straight into the map (no sorted copy): 10 bytes a voxel.
-            let tree = octomap_bt::read_leaves_keeping(reader, false)?;
+            // Expanded straight into the map (no sorted copy): 10 bytes a voxel. Free
+            // leaves are kept as boxes (24 bytes a leaf, in proportion to the file).
+            let tree = octomap_bt::read_leaves_keeping(reader, true)?;
             let total = tree.expanded_voxels_within(MAX_BT_VOXELS)?;
             let mut map =
                 OccupancyList::with_capacity(tree.resolution, total as usize).map_err(|e| {
@@ -108,10 +116,20 @@ pub fn read_map_from<R: BufRead>(reader: R, format: MapFormat) -> Result<LoadedM
             Ok(LoadedMap {
                 map,
                 format,
+                free: free_space_of(&tree),
                 bt: Some(tree.stats),
             })
         }
     }
+}
+
+/// The free leaves of a tree as the map's free space, `None` when it has none.
+fn free_space_of(tree: &octomap_bt::BtLeaves) -> Option<FreeSpace> {
+    let mut free = FreeSpace::new(tree.resolution).ok()?;
+    for (lo, hi) in tree.free_boxes() {
+        free.push(lo, hi).ok()?;
+    }
+    (!free.is_empty()).then_some(free)
 }
 
 /// Writes a map file (format from the extension), atomically. `.bt` keeps occupancy only

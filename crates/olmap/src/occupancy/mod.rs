@@ -18,6 +18,7 @@
 
 mod buckets;
 mod file;
+mod free;
 mod list;
 mod logodds;
 mod olm;
@@ -33,6 +34,7 @@ mod voxelize;
 
 pub use buckets::PositionBuckets;
 pub use file::{read_map, read_map_from, write_map, LoadedMap, MapFormat, MAX_BT_VOXELS};
+pub use free::{FreeBox, FreeSpace};
 pub use list::{OccupancyList, OccupancyStats};
 pub use logodds::{
     logit, run_free_space, FreeSpaceJob, FreeSpaceReport, FreeSpaceRun, LogOddsInsertStats,

@@ -228,6 +228,21 @@ impl LogOddsMap {
         }
     }
 
+    /// The occupied voxels as an occupancy list (count 1 each, as a `.bt` tree read as a
+    /// map gives them) and the free ones as the map's [`crate::occupancy::FreeSpace`]: what
+    /// a localisation in this map ([`crate::align::Localizer::with_free_space`]) takes.
+    pub fn occupancy_and_free(
+        &self,
+    ) -> Result<(crate::occupancy::OccupancyList, crate::occupancy::FreeSpace)> {
+        let mut occupied = crate::occupancy::OccupancyList::new(self.resolution)?;
+        for (k, s) in self.voxels() {
+            if s == VoxelState::Occupied {
+                occupied.set(k, 1)?;
+            }
+        }
+        Ok((occupied, crate::occupancy::FreeSpace::of_log_odds(self)))
+    }
+
     /// Gives back spare capacity (after the last insertion).
     pub fn shrink_to_fit(&mut self) {
         self.bricks.shrink_to_fit();
