@@ -29,7 +29,7 @@ use super::verify::{upright_look, upright_starts, upright_starts_after, MapSurfa
 use super::{Alignment, Candidate, OnWindowEdge, RegisterParams, Registration, SearchParams};
 use crate::cloud::PointCloud;
 use crate::error::Result;
-use crate::occupancy::OccupancyList;
+use crate::occupancy::{FreeSpace, OccupancyList};
 
 /// A prior map prepared for localising scans in it, one after another or from several
 /// threads at once ([`Localizer::localize`] takes `&self`).
@@ -43,7 +43,9 @@ use crate::occupancy::OccupancyList;
 /// index with the normals estimated so far (about 40 bytes a point once asked) and its
 /// surface (8 bytes a surface voxel), all at [`Localizer::resolution`]: 0.6 GB at peak for
 /// a 10.6 M-voxel warehouse map read at 0.1 m (1.8 M voxels there), 1.1 GB for a 5.2
-/// M-voxel one read at its own 0.05 m.
+/// M-voxel one read at its own 0.05 m. A map with its free space
+/// ([`Localizer::with_free_space`]) adds a bit per cell of its box at each level (the
+/// libpointmatcher car's 0.1 m map: 93 -> 361 MB peak).
 ///
 /// ```
 /// use nalgebra::Point3;
@@ -89,6 +91,8 @@ pub struct Localizer {
     map_resolution: f64,
     /// Voxels in the map as given.
     voxels: usize,
+    /// The free space known about the map, at [`Localizer::resolution`] (`None`: none).
+    free: Option<Arc<FreeSpace>>,
 }
 
 impl std::fmt::Debug for Localizer {
@@ -113,12 +117,47 @@ impl Localizer {
     /// # Errors
     /// [`crate::Error::InvalidArgument`] for invalid parameters.
     pub fn new(map: OccupancyList, params: &RegisterParams) -> Result<Self> {
-        Self::build(Cow::Owned(map), params, None)
+        Self::build(Cow::Owned(map), None, params, None)
     }
 
-    /// [`Localizer::new`] for one scan: the pyramid for its levels.
-    fn for_one(map: &OccupancyList, params: &RegisterParams, source: &PointCloud) -> Result<Self> {
-        Self::build(Cow::Borrowed(map), params, Some(source))
+    /// [`Localizer::new`] for a map that also says where its scans saw through (`free`, at
+    /// the map's voxel edge: a `.bt` tree's free leaves, [`FreeSpace::of_log_odds`]).
+    /// Scans are then searched and verified as [`super::register`] does between two
+    /// scans: a pose that puts a scan's surfaces where the map saw through scores less and
+    /// is contradicted on the scan's side too. Without free space only the map's side can
+    /// be contradicted (by where the scan saw through), and a scan whose view is covered
+    /// by a place in the map that looks alike may be trusted there, typically in a window
+    /// that leaves out the true pose (the README's trust section).
+    ///
+    /// Memory: one bit per cell of the free space's and the map's bounding box at each
+    /// pyramid level (1/7 more than the finest), up to 256 MiB a level (a level whose box
+    /// is larger keeps no free space).
+    ///
+    /// # Errors
+    /// As [`Localizer::new`]; [`crate::Error::InvalidArgument`] when the free space's voxel
+    /// edge is not the map's.
+    pub fn with_free_space(
+        map: OccupancyList,
+        free: FreeSpace,
+        params: &RegisterParams,
+    ) -> Result<Self> {
+        Self::build(Cow::Owned(map), Some(Cow::Owned(free)), params, None)
+    }
+
+    /// [`Localizer::new`] (or [`Localizer::with_free_space`]) for one scan: the pyramid for
+    /// its levels.
+    fn for_one(
+        map: &OccupancyList,
+        free: Option<&FreeSpace>,
+        params: &RegisterParams,
+        source: &PointCloud,
+    ) -> Result<Self> {
+        Self::build(
+            Cow::Borrowed(map),
+            free.map(Cow::Borrowed),
+            params,
+            Some(source),
+        )
     }
 
     /// Everything is made here, before any query: nothing is initialised lazily inside a
@@ -129,12 +168,26 @@ impl Localizer {
     /// level is made.
     fn build(
         map: Cow<'_, OccupancyList>,
+        free: Option<Cow<'_, FreeSpace>>,
         params: &RegisterParams,
         source: Option<&PointCloud>,
     ) -> Result<Self> {
         params.search.validate()?;
         let (map_resolution, voxels) = (map.resolution(), map.len());
+        if let Some(free) = &free {
+            if (free.resolution() - map_resolution).abs() > 1e-9 * map_resolution {
+                return Err(crate::Error::InvalidArgument(format!(
+                    "the free space's voxel edge ({} m) is not the map's ({map_resolution} m)",
+                    free.resolution()
+                )));
+            }
+        }
         let factor = working_factor(map_resolution, params.search.resolution);
+        let free = match free.filter(|f| !f.is_empty()) {
+            Some(f) if factor > 1 => Some(Arc::new(f.coarsened(factor)?)),
+            Some(f) => Some(Arc::new(f.into_owned())),
+            None => None,
+        };
         let map = if factor > 1 {
             map.downsample(factor)?
         } else {
@@ -154,7 +207,7 @@ impl Localizer {
             .map(|p| refinement_after_search(p, resolution));
         let (target, prepared) = rayon::join(
             || -> Result<(SearchTarget, MapSurfaces)> {
-                let target = SearchTarget::from_map(map, levels)?;
+                let target = target_of(map, free.as_deref(), levels)?;
                 let surfaces = MapSurfaces::of(&target);
                 Ok((target, surfaces))
             },
@@ -174,6 +227,7 @@ impl Localizer {
             resolution,
             map_resolution,
             voxels,
+            free,
         })
     }
 
@@ -199,6 +253,11 @@ impl Localizer {
         self.voxels == 0
     }
 
+    /// Whether free space is known about the map ([`Localizer::with_free_space`]).
+    pub fn has_free_space(&self) -> bool {
+        self.free.is_some()
+    }
+
     /// The search target with `levels` levels, made from the first one's map when no
     /// query asked for that many before.
     fn target(&self, levels: usize) -> Result<Arc<SearchTarget>> {
@@ -216,8 +275,9 @@ impl Localizer {
         };
         // Made without the lock (other queries go on meanwhile); kept unless another
         // query made the same meanwhile.
-        let made = Arc::new(SearchTarget::from_map(
+        let made = Arc::new(target_of(
             first.pyramid().level(0).clone(),
+            self.free.as_deref(),
             levels,
         )?);
         let mut targets = lock();
@@ -229,9 +289,9 @@ impl Localizer {
     }
 
     /// Localises `source` (a scan in its sensor frame) in the map: the global search (or
-    /// the window or locus `params.search.region` names) against the map, no free space
-    /// being known for a map (the score is the plain overlap), then ICP against the map's
-    /// voxel centres and the verdict. [`Registration::seconds`] counts this call only,
+    /// the window or locus `params.search.region` names) against the map (the score is
+    /// the plain overlap unless free space is known: [`Localizer::with_free_space`]), then
+    /// ICP against the map's voxel centres and the verdict. [`Registration::seconds`] counts this call only,
     /// not the map's preparation. Refinement parameters that prepare a target otherwise
     /// than those given to [`Localizer::new`] (another target voxel, normal source or
     /// neighbourhood) are served by a preparation for this call alone. The search runs at
@@ -286,6 +346,15 @@ impl Localizer {
     }
 }
 
+/// A search target of `levels` levels from a map (at the working resolution) and the free
+/// space known about it (at the same voxel edge).
+fn target_of(map: OccupancyList, free: Option<&FreeSpace>, levels: usize) -> Result<SearchTarget> {
+    match free {
+        Some(free) => SearchTarget::from_map_and_free(map, free, levels),
+        None => SearchTarget::from_map(map, levels),
+    }
+}
+
 /// The factor (a power of two) a map of voxel edge `map_resolution` is coarsened by to be
 /// searched at `resolution` (both metres, finite and > 0, as a map's and a validated
 /// search's are): the largest whose coarsened edge does not exceed `resolution`, up to a
@@ -333,8 +402,23 @@ pub fn localize(
     map: &OccupancyList,
     params: &RegisterParams,
 ) -> Result<Registration> {
+    localize_in(source, map, None, params)
+}
+
+/// [`localize`] in a map with the free space known about it (at the map's voxel edge; see
+/// [`Localizer::with_free_space`]), `None` for none.
+///
+/// # Errors
+/// As [`localize`]; [`crate::Error::InvalidArgument`] when the free space's voxel edge is
+/// not the map's.
+pub fn localize_in(
+    source: &PointCloud,
+    map: &OccupancyList,
+    free: Option<&FreeSpace>,
+    params: &RegisterParams,
+) -> Result<Registration> {
     let start = Instant::now();
-    let localizer = Localizer::for_one(map, params, source)?;
+    let localizer = Localizer::for_one(map, free, params, source)?;
     let mut r = localizer.localize(source, params)?;
     r.seconds = start.elapsed().as_secs_f64();
     Ok(r)

@@ -27,7 +27,7 @@ pub use consistency::{
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};
-pub use localize::{localize, working_factor, Localizer};
+pub use localize::{localize, localize_in, working_factor, Localizer};
 pub use params::{Dof, Locus, Region, SearchMode, SearchParams, MAX_LEVELS};
 pub use register::{
     register, register_to, register_to_prepared, register_to_prepared_or_widen, register_to_split,
@@ -39,7 +39,7 @@ pub use report::{
 };
 pub use search::{global_search, search};
 pub use significance::significance;
-pub use target::{SearchTarget, FREE_SPACE_MARGIN};
+pub use target::{SearchTarget, FREE_SPACE_MARGIN, MAP_FREE_CLEARANCE_CELLS};
 pub use verdict::TrustThresholds;
 
 use crate::cloud::PointCloud;
