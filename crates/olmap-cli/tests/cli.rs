@@ -641,6 +641,57 @@ fn align_json_and_localize_in_a_map() {
     let tx = results[1]["T_target_source"][0][3].as_f64().unwrap();
     assert!((tx - 3.378).abs() < 0.05, "{tx}");
     assert_eq!(results[1]["trusted"], true);
+    assert_eq!(many["free_space"], false, "a .olm map keeps no free space");
+    // The same map with its free space (an OctoMap tree with free nodes): a window around
+    // the identity leaves out scan002's true pose 3.4 m ahead; the identity, where the two
+    // sensors' floors and near walls lie on each other, is refused because scan002's walls
+    // would stand in the map's free space. Both scans are placed in it as before.
+    let free_map = dir.path().join("s0.bt");
+    let out = olmap(&[
+        "voxelize",
+        "--3dtk-valid",
+        "--resolution",
+        "0.1",
+        "--free-space",
+        s0.to_str().unwrap(),
+        "-o",
+        free_map.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let window = json(&olmap(&[
+        "localize",
+        "--json",
+        "--3dtk-valid",
+        s2.to_str().unwrap(),
+        free_map.to_str().unwrap(),
+        "--guess",
+        "0,0,0,0,0,0",
+        "--window",
+        "0.5,0.2,5",
+    ]));
+    assert_eq!(window["trusted"], false, "{}", window["doubts"]);
+    let with_free = json(&olmap(&[
+        "localize",
+        "--json",
+        "--3dtk-valid",
+        s1.to_str().unwrap(),
+        free_map.to_str().unwrap(),
+        "--also",
+        s2.to_str().unwrap(),
+    ]));
+    assert_eq!(with_free["free_space"], true);
+    for (r, ahead) in with_free["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip([1.568, 3.378])
+    {
+        let tx = r["T_target_source"][0][3].as_f64().unwrap();
+        assert!(
+            (tx - ahead).abs() < 0.05 && r["trusted"] == true,
+            "{tx} {r}"
+        );
+    }
     // --also places scans in a map, not in another scan.
     let out = olmap(&[
         "align",

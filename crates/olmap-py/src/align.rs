@@ -11,6 +11,7 @@ use pyo3::prelude::*;
 
 use crate::convert::{self, cloud_arg, pose_array, to_python};
 use crate::errors::{value_error, IntoPy};
+use crate::free_space::PyFreeSpaceMap;
 use crate::map::PyOccupancyMap;
 use crate::threads::detached;
 
@@ -258,12 +259,15 @@ pub fn align(
 }
 
 /// Localises a scan in a map: ``align`` against an OccupancyMap (the score is the plain
-/// overlap, as a map stores no free space), then ICP against the map's voxel centres. Same
-/// result as ``olmap localize``.
+/// overlap, as it stores no free space) or a FreeSpaceMap (its occupied voxels, and scans
+/// checked against its free space too, as ``align`` checks two scans against each other's
+/// rays: what keeps a ``window`` that leaves out the true pose from being trusted at a
+/// look-alike inside it), then ICP against the map's voxel centres. Same result as
+/// ``olmap localize`` (a FreeSpaceMap as the ``.bt`` tree it writes).
 ///
 /// Args:
 ///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.
-///     map: an OccupancyMap.
+///     map: an OccupancyMap or a FreeSpaceMap.
 ///     dof, max_tilt, guess, window, search, refine, max_range, threads, levels: as for
 ///         ``align``.
 ///     resolution: finest voxel edge of the search, metres. Default 0.1. A map finer than
@@ -281,7 +285,7 @@ pub fn align(
 pub fn localize(
     py: Python<'_>,
     scan: &Bound<'_, PyAny>,
-    map: &Bound<'_, PyOccupancyMap>,
+    map: &Bound<'_, PyAny>,
     dof: &str,
     max_tilt: f64,
     guess: Option<&Bound<'_, PyAny>>,
@@ -293,16 +297,47 @@ pub fn localize(
     levels: usize,
     resolution: f64,
 ) -> PyResult<PyAlignment> {
-    let map = map.get();
     let params = register_params(
         resolution, levels, dof, max_tilt, guess, window, search, refine, max_range,
     )?;
     let s = cloud_arg(scan, "scan")?;
-    let r = detached(py, threads, || {
-        library::localize(s.get(), &map.read(), &params)
-    })?
-    .py_err()?;
-    Ok(PyAlignment::new(&r, &s.name(), &map.source_name()))
+    let (r, name) = match map_arg(map)? {
+        MapArg::Occupancy(m) => {
+            let m = m.get();
+            let r = detached(py, threads, || {
+                library::localize(s.get(), &m.read(), &params)
+            })?;
+            (r, m.source_name())
+        }
+        MapArg::FreeSpace(m) => {
+            let m = m.get();
+            let r = detached(py, threads, || {
+                let (occupied, free) = m.read().occupancy_and_free()?;
+                library::localize_in(s.get(), &occupied, Some(&free), &params)
+            })?;
+            (r, "FreeSpaceMap".to_owned())
+        }
+    };
+    Ok(PyAlignment::new(&r.py_err()?, &s.name(), &name))
+}
+
+/// A map argument of ``localize`` and ``Localizer``.
+enum MapArg<'a, 'py> {
+    Occupancy(&'a Bound<'py, PyOccupancyMap>),
+    FreeSpace(&'a Bound<'py, PyFreeSpaceMap>),
+}
+
+fn map_arg<'a, 'py>(map: &'a Bound<'py, PyAny>) -> PyResult<MapArg<'a, 'py>> {
+    if let Ok(m) = map.cast::<PyOccupancyMap>() {
+        Ok(MapArg::Occupancy(m))
+    } else if let Ok(m) = map.cast::<PyFreeSpaceMap>() {
+        Ok(MapArg::FreeSpace(m))
+    } else {
+        Err(pyo3::exceptions::PyTypeError::new_err(format!(
+            "map must be an OccupancyMap or a FreeSpaceMap, not {}",
+            map.get_type().name()?
+        )))
+    }
 }
 
 /// A map prepared once for localising many scans in it (a localisation service): its
@@ -311,7 +346,8 @@ pub fn localize(
 /// refinement and checks. A snapshot: later changes to the OccupancyMap are not seen.
 ///
 /// Args:
-///     map: an OccupancyMap.
+///     map: an OccupancyMap, or a FreeSpaceMap (its free space checked too: see
+///         ``olmap.localize``).
 ///     dof, max_tilt, search, refine, max_range, levels, resolution: as for
 ///         ``olmap.localize``, kept for every query (a map finer than ``resolution`` is
 ///         prepared at its pyramid level within it).
@@ -364,7 +400,7 @@ impl PyLocalizer {
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        map: &Bound<'_, PyOccupancyMap>,
+        map: &Bound<'_, PyAny>,
         dof: &str,
         max_tilt: f64,
         search: &str,
@@ -374,7 +410,6 @@ impl PyLocalizer {
         levels: usize,
         resolution: f64,
     ) -> PyResult<Self> {
-        let map = map.get();
         let settings = QuerySettings {
             resolution,
             levels,
@@ -385,14 +420,27 @@ impl PyLocalizer {
             max_range,
         };
         let params = settings.params(None, None)?;
-        let inner = detached(py, threads, || {
-            library::Localizer::new(map.read().clone(), &params)
-        })?
-        .py_err()?;
+        let (inner, map_name) = match map_arg(map)? {
+            MapArg::Occupancy(m) => {
+                let m = m.get();
+                let inner = detached(py, threads, || {
+                    library::Localizer::new(m.read().clone(), &params)
+                })?;
+                (inner, m.source_name())
+            }
+            MapArg::FreeSpace(m) => {
+                let m = m.get();
+                let inner = detached(py, threads, || {
+                    let (occupied, free) = m.read().occupancy_and_free()?;
+                    library::Localizer::with_free_space(occupied, free, &params)
+                })?;
+                (inner, "FreeSpaceMap".to_owned())
+            }
+        };
         Ok(PyLocalizer {
-            inner,
+            inner: inner.py_err()?,
             settings,
-            map_name: map.source_name(),
+            map_name,
         })
     }
 
@@ -438,6 +486,12 @@ impl PyLocalizer {
     #[getter]
     fn map_resolution(&self) -> f64 {
         self.inner.map_resolution()
+    }
+
+    /// Whether the map's free space is known (prepared from a FreeSpaceMap).
+    #[getter]
+    fn free_space(&self) -> bool {
+        self.inner.has_free_space()
     }
 
     fn __repr__(&self) -> String {

@@ -46,7 +46,7 @@ pub struct PyFreeSpaceMap {
 }
 
 impl PyFreeSpaceMap {
-    fn read(&self) -> RwLockReadGuard<'_, LogOddsMap> {
+    pub(crate) fn read(&self) -> RwLockReadGuard<'_, LogOddsMap> {
         self.map.read().unwrap_or_else(|e| e.into_inner())
     }
 

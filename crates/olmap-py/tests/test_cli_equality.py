@@ -104,6 +104,36 @@ def test_a_map_prepared_once_localises_as_the_cli_does(data, cli, tmp_path):
     assert abs(results[1].T_target_source[0, 3] - 3.378) < 0.05
 
 
+def test_a_free_space_map_checks_scans_against_its_free_space_as_the_cli_does(data, cli, tmp_path):
+    """A FreeSpaceMap of scan000 localises as `olmap localize` in the `.bt` tree `olmap
+    voxelize --free-space` writes of it: a window around the identity leaves out scan002's
+    true pose 3.4 m ahead (data README §1.6), and the look-alike at the identity is refused
+    (scan002's walls would stand in the map's free space); a Localizer of it places scan001
+    and scan002 (5 cm, §1.7) as `--also` does."""
+    s0, s1, s2 = scan(data, 0), scan(data, 1), scan(data, 2)
+    out = tmp_path / "s0.bt"
+    cli("voxelize", "--3dtk-valid", "--resolution", "0.1", "--free-space", s0, "-o", out, parse=False)
+    m = olmap.FreeSpaceMap(resolution=0.1)
+    m.insert_scan(olmap.read_cloud(s0, valid_3dtk=True))
+    source = olmap.read_cloud(s2, valid_3dtk=True)
+    report = cli(
+        "localize", "--json", "--3dtk-valid", "--guess", "0,0,0,0,0,0", "--window", "0.5,0.2,5", s2, out,
+    )
+    res = olmap.localize(source, m, guess=np.eye(4), window=(0.5, 0.2, 5.0))
+    assert_same_alignment(res, report)
+    assert not res.trusted
+    report = cli("localize", "--json", "--3dtk-valid", s1, out, "--also", s2)
+    assert report["free_space"] is True
+    loc = olmap.Localizer(m)
+    assert loc.free_space
+    for s, r, ahead in zip((s1, s2), report["results"], (1.568, 3.378)):
+        res = loc.localize(olmap.read_cloud(s, valid_3dtk=True))
+        assert_same_alignment(res, r)
+        assert res.trusted and abs(res.T_target_source[0, 3] - ahead) < 0.05
+    with pytest.raises(TypeError, match="OccupancyMap or a FreeSpaceMap"):
+        olmap.localize(source, "map.bt")
+
+
 def test_a_map_finer_than_the_search_is_read_at_its_level_as_the_cli_does(data, cli, tmp_path):
     """A 0.05 m map localised in at the default 0.1 m search resolution is read at its
     0.1 m level by the CLI, olmap.localize and olmap.Localizer alike (scan002 is 3.378 m

@@ -32,7 +32,10 @@ pub enum SearchArg {
 pub struct AlignArgs {
     /// The scan to place (any point-cloud format; in its sensor frame).
     pub source: PathBuf,
-    /// What to place it in: a point cloud, or a map (.olm, .bt) for localisation.
+    /// What to place it in: a point cloud, or a map (.olm, .bt) for localisation. A `.bt`
+    /// tree with free nodes (`olmap voxelize --free-space`, OctoMap's own maps) also says
+    /// where its scans saw through, and a scan is checked against that too: build maps to
+    /// localise in that way, above all when a --window may leave out the true pose.
     pub target: PathBuf,
     /// Finest voxel edge of the search, metres. A map finer than this is localised in at
     /// its pyramid level closest to it without exceeding it (its voxel edge doubled as
@@ -291,8 +294,8 @@ pub fn run(a: &AlignArgs) -> anyhow::Result<ExitCode> {
     }
     let source = read_cloud(&a.source, a.threedtk_valid)?;
     let r = if is_map {
-        let map = occupancy::read_map(&a.target)?.map;
-        align::localize(&source, &map, &p)?
+        let loaded = occupancy::read_map(&a.target)?;
+        align::localize_in(&source, &loaded.map, loaded.free.as_ref(), &p)?
     } else {
         let target = read_cloud(&a.target, a.threedtk_valid)?;
         align::register(&source, &target, &p)?
@@ -309,19 +312,27 @@ fn localize_many(a: &AlignArgs, p: &RegisterParams) -> anyhow::Result<ExitCode> 
         .iter()
         .map(|path| read_cloud(path, a.threedtk_valid))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let map = occupancy::read_map(&a.target)?.map;
+    let loaded = occupancy::read_map(&a.target)?;
     let started = Instant::now();
-    let localizer = Localizer::new(map, p)?;
+    let localizer = match loaded.free {
+        Some(free) => Localizer::with_free_space(loaded.map, free, p)?,
+        None => Localizer::new(loaded.map, p)?,
+    };
     let prepare_seconds = started.elapsed().as_secs_f64();
     let target = a.target.display().to_string();
     let mut reports = Vec::new();
     if !a.json {
         println!(
-            "prepared {} ({} voxels at {} m, read at {} m) in {prepare_seconds:.3} s",
+            "prepared {} ({} voxels at {} m, read at {} m{}) in {prepare_seconds:.3} s",
             target,
             localizer.len(),
             localizer.map_resolution(),
-            localizer.resolution()
+            localizer.resolution(),
+            if localizer.has_free_space() {
+                ", with its free space"
+            } else {
+                ", no free space known"
+            }
         );
     }
     for (path, scan) in paths.iter().zip(&scans) {
@@ -342,6 +353,7 @@ fn localize_many(a: &AlignArgs, p: &RegisterParams) -> anyhow::Result<ExitCode> 
             "prepare_seconds": prepare_seconds,
             "map_resolution": localizer.map_resolution(),
             "resolution": localizer.resolution(),
+            "free_space": localizer.has_free_space(),
             "results": reports,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
