@@ -705,6 +705,65 @@ fn align_json_and_localize_in_a_map() {
     assert!(err.contains("--also") && err.contains("not a map"), "{err}");
 }
 
+/// `olmap map --free-space-out` writes the placed scans ray traced into a tree that keeps
+/// free space; scan002, held out, localised in it with a window around the identity (its
+/// truth 3.4 m ahead: data README §1.6) is refused, globally placed within 5 cm (§1.7); a
+/// free-space output that is not a .bt fails before any work.
+#[test]
+fn a_map_written_with_its_free_space_refuses_a_window_without_the_truth() {
+    let Some(d) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let folder = d.join("3dtk_dat");
+    let (s0, s1, s2) = (
+        folder.join("scan000.3d"),
+        folder.join("scan001.3d"),
+        folder.join("scan002.3d"),
+    );
+    let (map, free) = (dir.path().join("m.olm"), dir.path().join("m.bt"));
+    let out = olmap(&[
+        "map",
+        "--3dtk-valid",
+        s0.to_str().unwrap(),
+        s1.to_str().unwrap(),
+        "-o",
+        map.to_str().unwrap(),
+        "--free-space-out",
+        free.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let localize = |extra: &[&str]| {
+        let mut args = vec!["localize", "--json", "--3dtk-valid", s2.to_str().unwrap()];
+        args.push(free.to_str().unwrap());
+        args.extend_from_slice(extra);
+        json(&olmap(&args))
+    };
+    let window = localize(&["--guess", "0,0,0,0,0,0", "--window", "0.5,0.2,5"]);
+    assert_eq!(window["trusted"], false, "{}", window["translation"]);
+    let global = localize(&[]);
+    let tx = global["T_target_source"][0][3].as_f64().unwrap();
+    assert!(
+        global["trusted"] == true && (tx - 3.378).abs() < 0.05,
+        "{tx}"
+    );
+    let wrong = dir.path().join("free.olm");
+    let out = olmap(&[
+        "map",
+        s0.to_str().unwrap(),
+        "-o",
+        dir.path().join("other.olm").to_str().unwrap(),
+        "--free-space-out",
+        wrong.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("(.bt)"), "{err}");
+    assert!(!wrong.exists() && !dir.path().join("other.olm").exists());
+}
+
 #[test]
 fn map_a_3dtk_folder_then_eval_and_export() {
     let Some(d) = data() else { return };

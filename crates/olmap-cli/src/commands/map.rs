@@ -51,6 +51,12 @@ pub struct MapArgs {
     /// Write the scan poses `T_map_scan` as a pose list.
     #[arg(long, value_name = "FILE")]
     pub poses_out: Option<PathBuf>,
+    /// Also write the placed scans ray traced at their poses as an OctoMap .bt that keeps
+    /// free space (OctoMap's sensor model: hit 0.7, miss 0.4, clamped 0.1192-0.971; rays cut
+    /// at --max-range), at --resolution: the map to localise in with `olmap localize` when
+    /// a --window may leave out the true pose (scans are checked against its free space).
+    #[arg(long, value_name = "FILE.bt")]
+    pub free_space_out: Option<PathBuf>,
     /// Write each placed scan's own occupancy list (sensor frame) as NAME.olm into this
     /// folder, with their poses in poses.txt: the scan-pose pairs the map can be rebuilt
     /// from when poses change.
@@ -237,6 +243,7 @@ pub fn run(a: &MapArgs) -> anyhow::Result<ExitCode> {
         params: map_params(a)?,
         output: output.clone(),
         poses_out: a.poses_out.clone(),
+        free_space_out: a.free_space_out.clone(),
         scans_out: a.scans_out.clone(),
         report: a.report.clone(),
         graph_out: a.graph_out.clone(),
@@ -289,6 +296,7 @@ fn run_bag(
         params: map_params(a)?,
         output: output.to_path_buf(),
         poses_out: a.poses_out.clone(),
+        free_space_out: a.free_space_out.clone(),
         scans_out: a.scans_out.clone(),
         report: a.report.clone(),
         graph_out: a.graph_out.clone(),
@@ -386,12 +394,14 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
     if a.list.is_some()
         || a.odometry.is_some()
         || a.scans_out.is_some()
+        || a.free_space_out.is_some()
         || a.report.is_some()
         || a.graph
     {
         // (those are the 3D pipeline's inputs and outputs)
         bail!(
-            "{}: --list, --odometry, --scans-out, --report and --graph are for scan files (a \
+            "{}: --list, --odometry, --scans-out, --free-space-out, --report and --graph are \
+             for scan files (a \
              2D log always has its pose graph); a 2D log \
              carries its own poses (degraded with --odometry-noise)",
             log.display()

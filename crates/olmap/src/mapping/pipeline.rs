@@ -30,6 +30,11 @@ pub struct MapJob {
     pub output: PathBuf,
     /// Where to write the scan poses `T_map_scan` as a pose list.
     pub poses_out: Option<PathBuf>,
+    /// Where to write the placed scans ray traced at their poses into a map that keeps
+    /// free space ([`occupancy::LogOddsMap`] with OctoMap's default sensor model, rays cut
+    /// at the mapping's `max_range`), as an OctoMap `.bt` tree with free nodes: the map to
+    /// localise in when a prior window may be wrong ([`crate::align::Localizer::with_free_space`]).
+    pub free_space_out: Option<PathBuf>,
     /// A folder for each placed scan's own list (`NAME.olm`) and `poses.txt`; needs
     /// [`MapParams::keep_scan_maps`].
     pub scans_out: Option<PathBuf>,
@@ -60,6 +65,15 @@ fn declare_outputs(job: &MapJob) -> Result<OutputSet> {
     set.file(&job.output, "map")?;
     if let Some(p) = &job.poses_out {
         set.file(p, "pose list")?;
+    }
+    if let Some(p) = &job.free_space_out {
+        if MapFormat::of_output(p)? != MapFormat::OctomapBt {
+            return Err(Error::InvalidArgument(format!(
+                "{}: a map with free space is written as an OctoMap tree (.bt)",
+                p.display()
+            )));
+        }
+        set.file(p, "OctoMap .bt with free space")?;
     }
     if let Some(dir) = &job.scans_out {
         set.folder(dir)?;
@@ -168,6 +182,19 @@ fn map_and_write(
     }
     if let Some(out) = &job.poses_out {
         poses.write_path(set.path(out)?)?;
+    }
+    if let Some(out) = &job.free_space_out {
+        let mut free = occupancy::LogOddsMap::new(
+            params.register.search.resolution,
+            occupancy::LogOddsModel {
+                max_range: params.sensor.max_range,
+                ..Default::default()
+            },
+        )?;
+        for p in &build.placed {
+            free.insert_scan(&scans[p.index].cloud, &p.pose)?;
+        }
+        free.write_bt(&set.path(out)?)?;
     }
     if let (Some(out), Some(g)) = (&job.graph_out, &build.graph) {
         crate::graph::write_g2o(&set.path(out)?, &g.graph)?;

@@ -238,6 +238,7 @@ fn aligning_and_mapping_from_the_bag_equal_the_same_from_files() {
         params: olmap::mapping::MapParams::default(),
         output,
         poses_out: None,
+        free_space_out: None,
         scans_out: None,
         report: None,
         graph_out: None,

@@ -412,6 +412,7 @@ fn audit_map_report_dir_checked_before_compute() {
         params: MapParams::default(),
         output: dir.path().join("m.olm"),
         poses_out: Some(dir.path().join("p.txt")),
+        free_space_out: None,
         scans_out: None,
         report: Some(dir.path().join("nodir/r.json")),
         graph_out: None,

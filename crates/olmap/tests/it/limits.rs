@@ -472,6 +472,7 @@ fn audit_map_duplicate_scan_names_are_refused() {
         params: Default::default(),
         output: dir.path().join("m.olm"),
         poses_out: None,
+        free_space_out: None,
         scans_out: None,
         report: None,
         graph_out: None,

@@ -172,6 +172,7 @@ fn map_job_writes_what_its_report_says() {
         params: MapParams::default(),
         output: out.clone(),
         poses_out: Some(dir.path().join("poses.txt")),
+        free_space_out: None,
         scans_out: None,
         report: Some(dir.path().join("report.json")),
         graph_out: None,
