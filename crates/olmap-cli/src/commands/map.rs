@@ -401,9 +401,8 @@ fn run_log(a: &MapArgs, log: &std::path::Path) -> anyhow::Result<ExitCode> {
         // (those are the 3D pipeline's inputs and outputs)
         bail!(
             "{}: --list, --odometry, --scans-out, --free-space-out, --report and --graph are \
-             for scan files (a \
-             2D log always has its pose graph); a 2D log \
-             carries its own poses (degraded with --odometry-noise)",
+             for scan files (a 2D log always has its pose graph); a 2D log carries its own \
+             poses (degraded with --odometry-noise)",
             log.display()
         );
     }

@@ -175,12 +175,7 @@ impl Localizer {
         params.search.validate()?;
         let (map_resolution, voxels) = (map.resolution(), map.len());
         if let Some(free) = &free {
-            if (free.resolution() - map_resolution).abs() > 1e-9 * map_resolution {
-                return Err(crate::Error::InvalidArgument(format!(
-                    "the free space's voxel edge ({} m) is not the map's ({map_resolution} m)",
-                    free.resolution()
-                )));
-            }
+            free.check_resolution(map_resolution)?;
         }
         let factor = working_factor(map_resolution, params.search.resolution);
         let free = match free.filter(|f| !f.is_empty()) {

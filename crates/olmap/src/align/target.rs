@@ -131,13 +131,7 @@ impl SearchTarget {
         free: &crate::occupancy::FreeSpace,
         levels: usize,
     ) -> Result<Self> {
-        let resolution = map.resolution();
-        if (free.resolution() - resolution).abs() > 1e-9 * resolution {
-            return Err(crate::Error::InvalidArgument(format!(
-                "the free space's voxel edge ({} m) is not the map's ({resolution} m)",
-                free.resolution()
-            )));
-        }
+        free.check_resolution(map.resolution())?;
         let mut t = Self::from_map(map, levels)?;
         let pyramid = &t.pyramid;
         t.free = {

@@ -102,6 +102,21 @@ impl FreeSpace {
         self.resolution
     }
 
+    /// Checks that the free space is at a map's voxel edge (`resolution`, metres, up to a
+    /// relative 1e-9).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming both edges when it is not.
+    pub fn check_resolution(&self, resolution: f64) -> Result<()> {
+        if (self.resolution - resolution).abs() > 1e-9 * resolution {
+            return Err(Error::InvalidArgument(format!(
+                "the free space's voxel edge ({} m) is not the map's ({resolution} m)",
+                self.resolution
+            )));
+        }
+        Ok(())
+    }
+
     /// The boxes.
     pub fn boxes(&self) -> &[FreeBox] {
         &self.boxes
