@@ -430,15 +430,13 @@ fn free_at_level(
         }
     }
     let mut grid = DenseGrid::empty(lo, hi)?;
-    free.for_each_cell_at(shift, |x, y, z| grid.set(x, y, z));
+    free.for_each_column_at(shift, |x, y, z0, z1| grid.set_column(x, y, z0, z1));
     let r = MAP_FREE_CLEARANCE_CELLS;
     for (k, _) in level.iter() {
         let k = [k.x as i64, k.y as i64, k.z as i64];
-        for x in (k[0] - r).max(lo[0])..=(k[0] + r).min(hi[0]) {
-            for y in (k[1] - r).max(lo[1])..=(k[1] + r).min(hi[1]) {
-                for z in (k[2] - r).max(lo[2])..=(k[2] + r).min(hi[2]) {
-                    grid.clear(x, y, z);
-                }
+        for x in k[0] - r..=k[0] + r {
+            for y in k[1] - r..=k[1] + r {
+                grid.clear_column(x, y, k[2] - r, k[2] + r);
             }
         }
     }

@@ -182,16 +182,16 @@ impl FreeSpace {
         (!self.boxes.is_empty()).then_some((lo, hi))
     }
 
-    /// Calls `f` with every cell at `2^shift` times the voxel edge that holds a free voxel
-    /// (a cell in several boxes more than once).
-    pub(crate) fn for_each_cell_at(&self, shift: u32, mut f: impl FnMut(i64, i64, i64)) {
+    /// Calls `f(x, y, z_lo, z_hi)` with every column of cells at `2^shift` times the voxel
+    /// edge that holds free voxels: cells `(x, y, z_lo..=z_hi)` (a cell in several boxes more
+    /// than once). A box is one call per `(x, y)`, so filling a grid a run of bits at a time
+    /// costs the box's columns, not its cells.
+    pub(crate) fn for_each_column_at(&self, shift: u32, mut f: impl FnMut(i64, i64, i64, i64)) {
         for b in &self.boxes {
             let (l, h) = (cell(b.lo, shift), cell(b.hi, shift));
             for x in l[0]..=h[0] {
                 for y in l[1]..=h[1] {
-                    for z in l[2]..=h[2] {
-                        f(x, y, z);
-                    }
+                    f(x, y, l[2], h[2]);
                 }
             }
         }
@@ -229,7 +229,7 @@ mod tests {
             }]
         );
         let mut cells = Vec::new();
-        free.for_each_cell_at(1, |x, y, z| cells.push([x, y, z]));
+        free.for_each_column_at(1, |x, y, z0, z1| cells.extend((z0..=z1).map(|z| [x, y, z])));
         cells.sort_unstable();
         cells.dedup();
         assert_eq!(cells, vec![[-2, 0, 0], [-1, 0, 0]]);

@@ -152,6 +152,39 @@ impl DenseGrid {
         }
     }
 
+    /// Marks cells `(x, y, z0..=z1)` (the part inside the box), a word at a time.
+    pub fn set_column(&mut self, x: i64, y: i64, z0: i64, z1: i64) {
+        self.column(x, y, z0, z1, |w, mask| *w |= mask);
+    }
+
+    /// Clears cells `(x, y, z0..=z1)` (the part inside the box), a word at a time.
+    pub fn clear_column(&mut self, x: i64, y: i64, z0: i64, z1: i64) {
+        self.column(x, y, z0, z1, |w, mask| *w &= !mask);
+    }
+
+    /// Applies `op(word, mask)` to the words holding cells `(x, y, z0..=z1)` clipped to the
+    /// box, `mask` marking the column's bits in each.
+    fn column(&mut self, x: i64, y: i64, z0: i64, z1: i64, op: impl Fn(&mut u64, u64)) {
+        let last = self.min[2] + self.dims[2] as i64 - 1;
+        let (z0, z1) = (z0.max(self.min[2]), z1.min(last));
+        let (Some(first), true) = (self.index(x, y, z0), z0 <= z1) else {
+            return;
+        };
+        let end = first + (z1 - z0) as u64 + 1;
+        let mut at = first;
+        while at < end {
+            let (w, s) = ((at / 64) as usize, at % 64);
+            let n = (end - at).min(64 - s);
+            let mask = if n == 64 {
+                u64::MAX
+            } else {
+                ((1u64 << n) - 1) << s
+            };
+            op(&mut self.bits[w], mask);
+            at += n;
+        }
+    }
+
     /// Clears a cell (ignored outside the box).
     #[inline]
     pub fn clear(&mut self, x: i64, y: i64, z: i64) {
@@ -330,5 +363,37 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Setting and clearing a column marks exactly the cells one by one would, whatever
+    /// the column's bit offset and length (within a word, across words, longer than a
+    /// word) and wherever it leaves the box.
+    #[test]
+    fn columns_set_and_clear_exactly_their_cells_inside_the_box() {
+        let mut s = 11u64;
+        let (lo, hi) = ([-2, 1, -70], [3, 4, 61]);
+        let mut by_column = DenseGrid::empty(lo, hi).unwrap();
+        let mut by_cell = DenseGrid::empty(lo, hi).unwrap();
+        for round in 0..3000 {
+            let x = lo[0] - 1 + lcg(&mut s) % 8;
+            let y = lo[1] - 1 + lcg(&mut s) % 6;
+            let z0 = lo[2] - 5 + lcg(&mut s) % 140;
+            let z1 = z0 + lcg(&mut s) % (if round % 3 == 0 { 150 } else { 9 }) - 1;
+            let set = lcg(&mut s) % 3 != 0;
+            if set {
+                by_column.set_column(x, y, z0, z1);
+            } else {
+                by_column.clear_column(x, y, z0, z1);
+            }
+            for z in z0..=z1 {
+                if set {
+                    by_cell.set(x, y, z);
+                } else {
+                    by_cell.clear(x, y, z);
+                }
+            }
+        }
+        assert!(by_cell.words().iter().any(|w| *w != 0));
+        assert_eq!(by_column.words(), by_cell.words());
     }
 }
