@@ -184,17 +184,15 @@ fn map_and_write(
         poses.write_path(set.path(out)?)?;
     }
     if let Some(out) = &job.free_space_out {
-        let mut free = occupancy::LogOddsMap::new(
+        occupancy::LogOddsMap::of_placed_scans(
             params.register.search.resolution,
-            occupancy::LogOddsModel {
-                max_range: params.sensor.max_range,
-                ..Default::default()
-            },
-        )?;
-        for p in &build.placed {
-            free.insert_scan(&scans[p.index].cloud, &p.pose)?;
-        }
-        free.write_bt(&set.path(out)?)?;
+            params.sensor.max_range,
+            build
+                .placed
+                .iter()
+                .map(|p| (&scans[p.index].cloud, &p.pose)),
+        )?
+        .write_bt(&set.path(out)?)?;
     }
     if let (Some(out), Some(g)) = (&job.graph_out, &build.graph) {
         crate::graph::write_g2o(&set.path(out)?, &g.graph)?;

@@ -39,8 +39,9 @@ use serde::{Deserialize, Serialize};
 
 use self::bricks::{join, split, Bricks, BRICK_VOXELS};
 use self::model::{is_unknown, F32Model, UNKNOWN};
+use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::geometry::VoxelKey;
+use crate::geometry::{Pose, VoxelKey};
 
 /// What a log-odds map knows about a voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -138,6 +139,30 @@ impl LogOddsMap {
             voxels: 0,
             brick_limit: MAX_BRICKS,
         })
+    }
+
+    /// Scans placed at their poses (`T_map_sensor`) ray traced into a new map of
+    /// `resolution` metres with OctoMap's default sensor model, rays cut at `max_range`
+    /// metres: a mapping run's map that keeps its free space, for localising in
+    /// ([`crate::align::Localizer::with_free_space`] through [`LogOddsMap::write_bt`] and
+    /// [`crate::occupancy::read_map`]). The same scans give the same map in any order of
+    /// threads.
+    pub fn of_placed_scans<'a>(
+        resolution: f64,
+        max_range: f64,
+        scans: impl IntoIterator<Item = (&'a PointCloud, &'a Pose)>,
+    ) -> Result<Self> {
+        let mut map = LogOddsMap::new(
+            resolution,
+            LogOddsModel {
+                max_range,
+                ..Default::default()
+            },
+        )?;
+        for (cloud, pose) in scans {
+            map.insert_scan(cloud, pose)?;
+        }
+        Ok(map)
     }
 
     /// Voxel edge, metres.
