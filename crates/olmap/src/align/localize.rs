@@ -76,6 +76,9 @@ pub struct Localizer {
     /// Search targets by their number of levels (a scan's range sets how many the search
     /// uses: [`SearchParams::levels_for_source`]); the first made by [`Localizer::new`].
     targets: Mutex<Vec<Arc<SearchTarget>>>,
+    /// With free space, the same targets without it, made when a global query first asks:
+    /// a global search ranks poses by the map's surfaces alone ([`Localizer::localize`]).
+    surface_targets: Mutex<Vec<Arc<SearchTarget>>>,
     /// The map's voxel centres, in the map frame.
     points: PointCloud,
     /// `points` prepared for the refinement (`None` when refinement is off).
@@ -215,6 +218,7 @@ impl Localizer {
         let (target, surfaces) = target?;
         Ok(Localizer {
             targets: Mutex::new(vec![Arc::new(target)]),
+            surface_targets: Mutex::new(Vec::new()),
             points,
             prepared: prepared?,
             surfaces,
@@ -283,6 +287,26 @@ impl Localizer {
         Ok(made)
     }
 
+    /// The search target of `levels` levels without the map's free space (the map's
+    /// surfaces alone), made from [`Localizer::target`]'s when no query asked before.
+    fn surface_target(&self, levels: usize) -> Result<Arc<SearchTarget>> {
+        let lock = || {
+            self.surface_targets
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner())
+        };
+        if let Some(t) = lock().iter().find(|t| t.pyramid().levels() == levels) {
+            return Ok(Arc::clone(t));
+        }
+        let made = Arc::new(self.target(levels)?.without_free_space());
+        let mut targets = lock();
+        if let Some(t) = targets.iter().find(|t| t.pyramid().levels() == levels) {
+            return Ok(Arc::clone(t));
+        }
+        targets.push(Arc::clone(&made));
+        Ok(made)
+    }
+
     /// Localises `source` (a scan in its sensor frame) in the map: the global search (or
     /// the window or locus `params.search.region` names) against the map (the score is
     /// the plain overlap unless free space is known: [`Localizer::with_free_space`]), then
@@ -301,6 +325,20 @@ impl Localizer {
         let search_params = search_params(params, resolution)?;
         let levels = search_params.levels_for_source(resolution, self.extent, source);
         let target = self.target(levels)?;
+        // A global search in a map with free space ranks poses on the map's surfaces
+        // alone, as in the map without it, so that its look-alikes are listed and
+        // verified; the free space then counts against every refined pose, and the
+        // verdict trusts a match only where the surfaces single it out
+        // (`verdict::map_surface_doubts`). Ranked with the free space, a look-alike
+        // whose lattice pose lays surfaces a step off into seen-through cells drops out
+        // of the list, and in the demo lab a scan of a place the map did not hold was
+        // trusted on the one look-alike left (15-24 m off).
+        let global = matches!(search_params.region, super::Region::Global);
+        let surfaces = match self.free.is_some() && global {
+            true => Some(self.surface_target(levels)?),
+            false => None,
+        };
+        let ranked_on: &SearchTarget = surfaces.as_deref().unwrap_or(&target);
         // With more than one thread the upright look's search runs beside the first (the
         // coarse levels of one search leave a core idle) and its starts are taken as
         // `upright_starts` would take them: the same starts, wasted when the first search
@@ -308,10 +346,10 @@ impl Localizer {
         // is no verification; on one thread the look waits until one asks for it.
         let beside = params.refine.is_some() && rayon::current_num_threads() > 1;
         let (search, look) = rayon::join(
-            || global_search(source, &target, &search_params),
+            || global_search(source, ranked_on, &search_params),
             || {
                 if beside {
-                    upright_look(source, &target, &search_params)
+                    upright_look(source, ranked_on, &search_params)
                 } else {
                     Ok(None)
                 }
@@ -321,7 +359,7 @@ impl Localizer {
         let upright = |s: &Alignment| -> Result<Vec<Candidate>> {
             match &look {
                 Some(look) => Ok(upright_starts_after(look, &search_params, s)),
-                None => upright_starts(source, &target, &search_params, s),
+                None => upright_starts(source, ranked_on, &search_params, s),
             }
         };
         finish(
@@ -331,6 +369,7 @@ impl Localizer {
                 points: &|| Cow::Borrowed(&self.points),
                 prepared: self.prepared.as_ref(),
                 surfaces: Some(&self.surfaces),
+                map_free_space: self.free.is_some(),
             },
             search,
             &upright,

@@ -9,8 +9,8 @@ use super::lattice::{Alignment, Candidate};
 use super::search::global_search;
 use super::target::SearchTarget;
 use super::verdict::{
-    agreement_doubts, look_alike_doubts, refinement_doubts, search_doubts, uniqueness_doubts,
-    upright_look_doubts, window_doubts, TrustThresholds,
+    agreement_doubts, look_alike_doubts, map_surface_doubts, refinement_doubts, search_doubts,
+    uniqueness_doubts, upright_look_doubts, window_doubts, TrustThresholds,
 };
 use super::verify::{
     starts, upright_look, upright_starts, upright_starts_after, verify, GlobalChecks, MapSurfaces,
@@ -97,6 +97,9 @@ pub(super) struct Against<'a> {
     /// The surface of a map's points for the agreement counts, prepared with the map
     /// (`None`: the points are not a map's voxel centres).
     pub(super) surfaces: Option<&'a MapSurfaces>,
+    /// Whether `target` is a map with the free space its scans saw through (a global
+    /// match then also passes [`super::verdict::map_surface_doubts`]).
+    pub(super) map_free_space: bool,
 }
 
 pub(super) fn finish(
@@ -156,6 +159,7 @@ pub(super) fn finish(
                 matches!(params.search.region, super::Region::Global).then_some(GlobalChecks {
                     min_agreement: params.trust.min_agreement,
                     min_refutation: params.trust.min_refutation,
+                    map_free_space: against.map_free_space,
                 }),
             )?)
         }
@@ -166,6 +170,9 @@ pub(super) fn finish(
             let w = v.winner();
             let global = matches!(params.search.region, super::Region::Global);
             doubts.extend(uniqueness_doubts(v, &params.trust, global));
+            if global && against.map_free_space {
+                doubts.extend(map_surface_doubts(v, &params.trust));
+            }
             doubts.extend(look_alike_doubts(v, global));
             doubts.extend(refinement_doubts(
                 &w.start,
@@ -249,6 +256,7 @@ fn register_looking_beside(
             points: &|| Cow::Borrowed(refine_target),
             prepared: None,
             surfaces: None,
+            map_free_space: false,
         },
         search,
         &|s: &Alignment| {
@@ -410,6 +418,7 @@ pub(crate) fn register_preparing<'p>(
             points: &|| Cow::Borrowed(refine_target),
             prepared,
             surfaces: None,
+            map_free_space: false,
         },
         search,
         &|s: &Alignment| upright_starts(search_source, target, &params.search, s),

@@ -144,6 +144,18 @@ impl SearchTarget {
         Ok(t)
     }
 
+    /// The same occupied cells without free space: what a map without it is searched
+    /// against.
+    pub(crate) fn without_free_space(&self) -> SearchTarget {
+        let levels = self.pyramid.levels();
+        SearchTarget {
+            pyramid: self.pyramid.clone(),
+            free: (0..levels).map(|_| None).collect(),
+            occupied: (0..levels).map(|_| OnceLock::new()).collect(),
+            grids: empty_grids(levels),
+        }
+    }
+
     /// The same target from its level `k` up, at `2^k` times the resolution (its
     /// occupied cells and free space as they are at those levels); `None` when `k` is not
     /// a level.
