@@ -262,8 +262,9 @@ pub fn align(
 /// overlap, as it stores no free space) or a FreeSpaceMap (its occupied voxels, and scans
 /// checked against its free space too, as ``align`` checks two scans against each other's
 /// rays: what keeps a ``window`` that leaves out the true pose from being trusted at a
-/// look-alike inside it), then ICP against the map's voxel centres. Same result as
-/// ``olmap localize`` (a FreeSpaceMap as the ``.bt`` tree it writes).
+/// look-alike inside it; globally a match is trusted only where the map's surfaces alone
+/// single it out), then ICP against the map's voxel centres. Same result as ``olmap
+/// localize`` (a FreeSpaceMap as the ``.bt`` tree it writes).
 ///
 /// Args:
 ///     scan: a PointCloud or an (N, 3) array-like of metres, in its sensor frame.

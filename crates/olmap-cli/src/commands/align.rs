@@ -36,6 +36,10 @@ pub struct AlignArgs {
     /// tree with free nodes (`olmap voxelize --free-space`, OctoMap's own maps) also says
     /// where its scans saw through, and a scan is checked against that too: build maps to
     /// localise in that way, above all when a --window may leave out the true pose.
+    /// Globally (no --window) a match in such a map is trusted only where the map's
+    /// surfaces alone single it out: its free space refutes look-alikes, but a scan of a
+    /// place the map does not hold would otherwise be trusted on the look-alike it
+    /// contradicts least.
     pub target: PathBuf,
     /// Finest voxel edge of the search, metres. A map finer than this is localised in at
     /// its pyramid level closest to it without exceeding it (its voxel edge doubled as
