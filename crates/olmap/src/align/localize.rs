@@ -260,51 +260,22 @@ impl Localizer {
     /// The search target with `levels` levels, made from the first one's map when no
     /// query asked for that many before.
     fn target(&self, levels: usize) -> Result<Arc<SearchTarget>> {
-        let lock = || {
-            self.targets
-                .lock()
-                .unwrap_or_else(|poisoned| poisoned.into_inner())
-        };
-        let first = {
-            let targets = lock();
-            if let Some(t) = targets.iter().find(|t| t.pyramid().levels() == levels) {
-                return Ok(Arc::clone(t));
-            }
-            Arc::clone(&targets[0])
-        };
-        // Made without the lock (other queries go on meanwhile); kept unless another
-        // query made the same meanwhile.
-        let made = Arc::new(target_of(
-            first.pyramid().level(0).clone(),
-            self.free.as_deref(),
-            levels,
-        )?);
-        let mut targets = lock();
-        if let Some(t) = targets.iter().find(|t| t.pyramid().levels() == levels) {
-            return Ok(Arc::clone(t));
-        }
-        targets.push(Arc::clone(&made));
-        Ok(made)
+        find_or_make(&self.targets, levels, || {
+            let first = Arc::clone(&lock(&self.targets)[0]);
+            target_of(
+                first.pyramid().level(0).clone(),
+                self.free.as_deref(),
+                levels,
+            )
+        })
     }
 
     /// The search target of `levels` levels without the map's free space (the map's
     /// surfaces alone), made from [`Localizer::target`]'s when no query asked before.
     fn surface_target(&self, levels: usize) -> Result<Arc<SearchTarget>> {
-        let lock = || {
-            self.surface_targets
-                .lock()
-                .unwrap_or_else(|poisoned| poisoned.into_inner())
-        };
-        if let Some(t) = lock().iter().find(|t| t.pyramid().levels() == levels) {
-            return Ok(Arc::clone(t));
-        }
-        let made = Arc::new(self.target(levels)?.without_free_space());
-        let mut targets = lock();
-        if let Some(t) = targets.iter().find(|t| t.pyramid().levels() == levels) {
-            return Ok(Arc::clone(t));
-        }
-        targets.push(Arc::clone(&made));
-        Ok(made)
+        find_or_make(&self.surface_targets, levels, || {
+            Ok(self.target(levels)?.without_free_space())
+        })
     }
 
     /// Localises `source` (a scan in its sensor frame) in the map: the global search (or
@@ -334,11 +305,11 @@ impl Localizer {
         // of the list, and in the demo lab a scan of a place the map did not hold was
         // trusted on the one look-alike left (15-24 m off).
         let global = matches!(search_params.region, super::Region::Global);
-        let surfaces = match self.free.is_some() && global {
+        let surface_only = match self.free.is_some() && global {
             true => Some(self.surface_target(levels)?),
             false => None,
         };
-        let ranked_on: &SearchTarget = surfaces.as_deref().unwrap_or(&target);
+        let ranked_on: &SearchTarget = surface_only.as_deref().unwrap_or(&target);
         // With more than one thread the upright look's search runs beside the first (the
         // coarse levels of one search leave a core idle) and its starts are taken as
         // `upright_starts` would take them: the same starts, wasted when the first search
@@ -378,6 +349,37 @@ impl Localizer {
             OnWindowEdge::Refine,
         )
     }
+}
+
+/// The targets in `slot`, locked (a query that panicked holding it left it whole: targets
+/// are only pushed).
+fn lock(slot: &Mutex<Vec<Arc<SearchTarget>>>) -> std::sync::MutexGuard<'_, Vec<Arc<SearchTarget>>> {
+    slot.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The target of `levels` levels in `slot`, or one `make` makes without the lock (other
+/// queries go on meanwhile), kept unless another query made the same meanwhile.
+fn find_or_make(
+    slot: &Mutex<Vec<Arc<SearchTarget>>>,
+    levels: usize,
+    make: impl FnOnce() -> Result<SearchTarget>,
+) -> Result<Arc<SearchTarget>> {
+    let find = |targets: &[Arc<SearchTarget>]| {
+        targets
+            .iter()
+            .find(|t| t.pyramid().levels() == levels)
+            .cloned()
+    };
+    if let Some(t) = find(&lock(slot)) {
+        return Ok(t);
+    }
+    let made = Arc::new(make()?);
+    let mut targets = lock(slot);
+    if let Some(t) = find(&targets) {
+        return Ok(t);
+    }
+    targets.push(Arc::clone(&made));
+    Ok(made)
 }
 
 /// A search target of `levels` levels from a map (at the working resolution) and the free

@@ -855,15 +855,14 @@ pub(super) fn verify(
                 .and_then(|m| (m.screen.0 == k).then_some(&m.screen.1));
             let quick =
                 |at: &Pose| count_against(&coarse, coarse_seen.as_ref(), coarse_map, at, at);
-            let reference = quick(&hypotheses[best].pose())?;
+            // In a map with free space the counts are compared on its surfaces alone.
+            let compared = |c: Consistency| match g.map_free_space {
+                true => on_surfaces(&c),
+                false => c,
+            };
+            let reference = compared(quick(&hypotheses[best].pose())?);
             for c in heads {
-                let (q, r) = (quick(&c.pose)?, &reference);
-                let beats = if g.map_free_space {
-                    could_beat(&on_surfaces(r), &on_surfaces(&q), g.min_refutation)
-                } else {
-                    could_beat(r, &q, g.min_refutation)
-                };
-                if beats {
+                if could_beat(&reference, &compared(quick(&c.pose)?), g.min_refutation) {
                     screened.push(c);
                 }
             }
