@@ -182,7 +182,11 @@ pub(super) fn finish(
                 params.search.dof,
                 &params.trust,
             ));
-            doubts.extend(agreement_doubts(&w.consistency, &params.trust));
+            doubts.extend(agreement_doubts(
+                &w.consistency,
+                &params.trust,
+                against.map_free_space,
+            ));
             doubts.extend(upright_look_doubts(w, &params.trust));
             let mut edge = window_doubts(&w.start.pose, &params.search);
             let moved = (w.pose().translation() - w.start.pose.translation()).norm();
