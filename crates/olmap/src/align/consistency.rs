@@ -30,6 +30,7 @@ use crate::cloud::PointCloud;
 use crate::error::Result;
 use nalgebra::Point3;
 use rayon::prelude::*;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::geometry::{Pose, VoxelKey};
 use crate::occupancy::packed::{pack_key, unpack_key, KEY_MAX, KEY_MIN};
@@ -144,6 +145,12 @@ pub struct SideAgreement {
     pub upright_supported: u64,
     /// Contradicted voxels on upright structure.
     pub upright_contradicted: u64,
+    /// Contradicted voxels in patches larger than a thing that moves
+    /// ([`MOVABLE_WIDTH`] across, [`MOVABLE_HEIGHT`] tall): a wall, a floor-to-ceiling
+    /// strip, furniture rows, not a person, a chair or a door.
+    pub fixed_contradicted: u64,
+    /// Of those, the ones on upright structure.
+    pub upright_fixed_contradicted: u64,
 }
 
 impl SideAgreement {
@@ -164,6 +171,27 @@ impl SideAgreement {
             1.0
         } else {
             s as f64 / (s + c) as f64
+        }
+    }
+
+    /// The share of this scan's observed surface (counted as in
+    /// [`SideAgreement::agreement`]) that lies where the other saw through in patches
+    /// larger than a thing that moves ([`SideAgreement::fixed_contradicted`]); 0 when the
+    /// other observed none.
+    pub fn fixed_disagreement(&self) -> f64 {
+        let (s, c, f) = if self.upright_supported + self.upright_contradicted >= MIN_UPRIGHT_SEEN {
+            (
+                self.upright_supported,
+                self.upright_contradicted,
+                self.upright_fixed_contradicted,
+            )
+        } else {
+            (self.supported, self.contradicted, self.fixed_contradicted)
+        };
+        if s + c == 0 {
+            0.0
+        } else {
+            f as f64 / (s + c) as f64
         }
     }
 }
@@ -227,7 +255,7 @@ fn count_side(mine: &OccupancyList, origin: &Point3<f64>, other: &SearchTarget) 
         (side, through)
     };
     let parts: Vec<Part> = keys.par_chunks(COUNT_CHUNK).map(count_chunk).collect();
-    add_parts(parts)
+    add_parts(parts, res)
 }
 
 /// One part of a count: the supported voxels of a chunk, and its voxels seen through
@@ -238,7 +266,7 @@ type Part = (SideAgreement, Vec<(VoxelKey, bool)>);
 /// as contradicted only in patches. A wall or a piece of furniture standing in the other's
 /// open space is a patch of voxels; a stray return (noise, a spurious point, a random
 /// outlier) is not and says nothing about the pose.
-fn add_parts(parts: Vec<Part>) -> SideAgreement {
+fn add_parts(parts: Vec<Part>, resolution: f64) -> SideAgreement {
     let mut side = SideAgreement::default();
     let mut seen_through = std::collections::HashMap::new();
     for (part, through) in parts {
@@ -246,6 +274,7 @@ fn add_parts(parts: Vec<Part>) -> SideAgreement {
         side.upright_supported += part.upright_supported;
         seen_through.extend(through);
     }
+    let mut contradicted = FxHashMap::default();
     for (k, up) in &seen_through {
         let patch = neighbourhood(*k)
             .filter(|n| n != k && seen_through.contains_key(n))
@@ -254,9 +283,64 @@ fn add_parts(parts: Vec<Part>) -> SideAgreement {
         if patch {
             side.contradicted += 1;
             side.upright_contradicted += u64::from(*up);
+            contradicted.insert(*k, *up);
+        }
+    }
+    for patch in patches(&contradicted) {
+        if !movable(&patch, resolution) {
+            side.fixed_contradicted += patch.len() as u64;
+            side.upright_fixed_contradicted +=
+                patch.iter().filter(|k| contradicted[*k]).count() as u64;
         }
     }
     side
+}
+
+/// The widest a thing that moves between two scans may be across, in metres (a person, a
+/// chair, a door, a trolley): a patch of contradicted voxels that fits in a box this wide
+/// in x and y and [`MOVABLE_HEIGHT`] tall may be one, a larger patch is structure.
+pub const MOVABLE_WIDTH: f64 = 1.2;
+
+/// The tallest a thing that moves may be, in metres (a door and its frame).
+pub const MOVABLE_HEIGHT: f64 = 2.2;
+
+/// The connected patches (26-neighbourhood) of `voxels`, sorted within and between
+/// patches so that the result does not depend on the hash's order.
+fn patches(voxels: &FxHashMap<VoxelKey, bool>) -> Vec<Vec<VoxelKey>> {
+    let mut keys: Vec<VoxelKey> = voxels.keys().copied().collect();
+    keys.sort_unstable_by_key(|k| (k.x, k.y, k.z));
+    let mut done = FxHashSet::default();
+    let mut out = Vec::new();
+    for k in keys {
+        if !done.insert(k) {
+            continue;
+        }
+        let (mut patch, mut stack) = (Vec::new(), vec![k]);
+        while let Some(c) = stack.pop() {
+            patch.push(c);
+            for n in neighbourhood(c) {
+                if voxels.contains_key(&n) && done.insert(n) {
+                    stack.push(n);
+                }
+            }
+        }
+        out.push(patch);
+    }
+    out
+}
+
+/// Whether a patch of voxels at `resolution` fits in the box of a thing that moves.
+fn movable(patch: &[VoxelKey], resolution: f64) -> bool {
+    let extent = |f: fn(&VoxelKey) -> i32| {
+        let (lo, hi) = patch
+            .iter()
+            .map(f)
+            .fold((i32::MAX, i32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        f64::from(hi - lo + 1) * resolution
+    };
+    extent(|k| k.x) <= MOVABLE_WIDTH + 1e-9
+        && extent(|k| k.y) <= MOVABLE_WIDTH + 1e-9
+        && extent(|k| k.z) <= MOVABLE_HEIGHT + 1e-9
 }
 
 /// Whether `other` observed the cell of finest key `k` (in its frame), `d` metres from the
@@ -448,7 +532,7 @@ impl MapSurface {
         // Nothing of the map where the scan could be: no side to count (as for an empty
         // crop of a target's points).
         let any = parts.iter().any(|(_, inside)| *inside);
-        any.then(|| add_parts(parts.into_iter().map(|(part, _)| part).collect()))
+        any.then(|| add_parts(parts.into_iter().map(|(part, _)| part).collect(), res))
     }
 
     /// The runs of [`MapSurface::voxels`] whose keys lie in the x-y key columns that
@@ -725,6 +809,48 @@ impl QuickFit {
 mod tests {
     use super::*;
 
+    /// The patches of contradicted voxels a person, a chair or a door make count as
+    /// things that may have moved; a wall 3 m wide or a strip from floor to ceiling (2.6
+    /// m) is structure. Patches are 26-connected: two people apart are two patches.
+    #[test]
+    fn a_person_sized_patch_may_have_moved_and_a_wall_has_not() {
+        let block = |x0: i32, y0: i32, nx: i32, ny: i32, nz: i32| {
+            let mut v = Vec::new();
+            for x in x0..x0 + nx {
+                for y in y0..y0 + ny {
+                    for z in 0..nz {
+                        v.push(VoxelKey::new(x, y, z));
+                    }
+                }
+            }
+            v
+        };
+        let res = 0.1;
+        // A person's front at 0.1 m: 0.5 m across, 1.7 m tall; a door 0.9 x 2.1 m.
+        assert!(movable(&block(0, 0, 5, 1, 17), res));
+        assert!(movable(&block(0, 0, 9, 2, 21), res));
+        // A wall 3 m wide, a floor-to-ceiling strip 0.4 x 0.7 x 2.6 m.
+        assert!(!movable(&block(0, 0, 30, 1, 20), res));
+        assert!(!movable(&block(0, 0, 4, 7, 26), res));
+        let two_people: FxHashMap<VoxelKey, bool> = block(0, 0, 5, 1, 17)
+            .into_iter()
+            .chain(block(10, 0, 5, 1, 17))
+            .map(|k| (k, true))
+            .collect();
+        let found = patches(&two_people);
+        assert_eq!(found.len(), 2);
+        assert!(found.iter().all(|p| p.len() == 85 && movable(p, res)));
+        // Side by side they touch: one patch, 1.5 m across, no longer a thing that moves.
+        let touching: FxHashMap<VoxelKey, bool> = block(0, 0, 5, 1, 17)
+            .into_iter()
+            .chain(block(5, 0, 10, 1, 17))
+            .map(|k| (k, true))
+            .collect();
+        let found = patches(&touching);
+        assert_eq!(found.len(), 1);
+        assert!(!movable(&found[0], res));
+    }
+
     /// A floor, a wall and scattered specks at 0.1 m, some keys negative.
     fn scene() -> OccupancyList {
         let mut points = Vec::new();
@@ -938,6 +1064,7 @@ mod tests {
                 observed += 1;
             }
         }
+        let mut contradicted = FxHashMap::default();
         for (k, up) in &through {
             let n = neighbourhood(*k)
                 .filter(|n| n != k && through.contains_key(n))
@@ -945,6 +1072,16 @@ mod tests {
             if n >= MIN_CONTRADICTED_NEIGHBOURS {
                 side.contradicted += 1;
                 side.upright_contradicted += u64::from(*up);
+                contradicted.insert(*k, *up);
+            }
+        }
+        // Patches larger than a thing that moves (`patches` and `movable` are tested
+        // on their own).
+        for patch in patches(&contradicted) {
+            if !movable(&patch, other.resolution()) {
+                side.fixed_contradicted += patch.len() as u64;
+                side.upright_fixed_contradicted +=
+                    patch.iter().filter(|k| contradicted[*k]).count() as u64;
             }
         }
         (side, surf.len(), observed)

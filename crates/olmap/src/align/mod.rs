@@ -23,7 +23,8 @@ pub mod verify;
 pub use bnb::{EXACT_MAX_AMBIGUITY, EXACT_MAX_WORK};
 pub use consistency::{
     consistency, consistency_seen, source_view, Consistency, SideAgreement,
-    MIN_CONTRADICTED_NEIGHBOURS, MIN_SURFACE_NEIGHBOURS, MIN_UPRIGHT_SEEN,
+    MIN_CONTRADICTED_NEIGHBOURS, MIN_SURFACE_NEIGHBOURS, MIN_UPRIGHT_SEEN, MOVABLE_HEIGHT,
+    MOVABLE_WIDTH,
 };
 pub use exhaustive::exhaustive_search;
 pub use lattice::{Alignment, Candidate, LevelReport};

@@ -1003,6 +1003,8 @@ fn on_surfaces(c: &Consistency) -> Consistency {
         source: SideAgreement {
             contradicted: 0,
             upright_contradicted: 0,
+            fixed_contradicted: 0,
+            upright_fixed_contradicted: 0,
             ..c.source
         },
         ..*c

@@ -169,9 +169,10 @@ fn pairs_the_floor_hides_are_found_by_the_upright_look_and_look_alikes_doubted()
 /// over a corner of a room in another (trust suite, seed 1, unrelated pair 6): every test
 /// but one passed (overlap 0.49, z 93, distinct rivals refuted, agreement 0.925 against the
 /// 0.85 floor, which right real pairs need: 3DTK 002->000 agrees at 0.89), and it was
-/// trusted. Each scan leaves a wall where the other saw through: 6.1 % of the scan's
-/// observed surface and 7.5 % of the target's. Right pairs leave such surfaces on one side
-/// only (things that moved, glass), so the verdict's two-sided test
+/// trusted. Each scan leaves structure where the other saw through (a strip from floor to
+/// ceiling, a wall 3 m long): 6.1 % of the scan's observed surface and 4.8 % of the
+/// target's in patches larger than a thing that moves. Right pairs leave such structure on
+/// one side only (a door, glass), so the verdict's two-sided test
 /// (`TrustThresholds::max_two_sided_disagreement`) doubts it; the real pairs, which leave
 /// 3-11 % on one side and at most 1.4 % on the other, stay trusted (`align.rs`).
 #[test]
@@ -186,10 +187,88 @@ fn a_room_corner_laid_over_another_world_s_corner_is_not_trusted() {
     assert!(
         r.doubts
             .iter()
-            .any(|d| d.starts_with("both scans leave surfaces")),
+            .any(|d| d.starts_with("both scans leave structure")),
         "{:?}",
         r.doubts
     );
+}
+
+/// `k` people (fronts 0.5 m wide and 1.75 m tall, 1.5-4 m from the sensor, each where the
+/// scan saw at least 0.5 m past them) added to a scan as its scanner would see them: what
+/// lies behind each person within its width and height is replaced by the person's front.
+fn with_people(scan: &PointCloud, k: usize, rng: &mut olmap::sim::SimRng) -> PointCloud {
+    use std::f64::consts::PI;
+    let o = scan.origin();
+    let mut points: Vec<nalgebra::Point3<f32>> = scan.points().to_vec();
+    // Range in the plane and the angle off `heading` of each point, and whether it lies
+    // in the height band a person hides.
+    let polar = |p: &nalgebra::Point3<f32>, heading: f64| {
+        let (dx, dy) = (f64::from(p.x) - o.x, f64::from(p.y) - o.y);
+        let off = (dy.atan2(dx) - heading + PI).rem_euclid(2.0 * PI) - PI;
+        (dx.hypot(dy), off, p.z > 0.02 && p.z < 1.75)
+    };
+    for _ in 0..k {
+        let (mut r, mut heading) = (0.0, 0.0);
+        for _ in 0..50 {
+            r = rng.range(1.5, 4.0);
+            heading = rng.range(-PI, PI);
+            let half = (0.25 / r).atan();
+            let behind: Vec<f64> = points
+                .iter()
+                .map(|p| polar(p, heading))
+                .filter(|&(_, off, band)| band && off.abs() < half)
+                .map(|(d, _, _)| d)
+                .collect();
+            let open = behind.iter().filter(|&&d| d > r + 0.5).count();
+            if behind.len() > 20 && open * 10 > behind.len() * 9 {
+                break;
+            }
+        }
+        let half = (0.25 / r).atan();
+        for p in &mut points {
+            let (d, off, band) = polar(p, heading);
+            if band && off.abs() < half && d > r {
+                p.x = (o.x + (f64::from(p.x) - o.x) * r / d) as f32;
+                p.y = (o.y + (f64::from(p.y) - o.y) * r / d) as f32;
+            }
+        }
+    }
+    PointCloud::from_points(points).with_origin(o)
+}
+
+/// The two-sided agreement test leaves people alone: two scans of one place, each with 6
+/// people standing where the other saw through (drawn anew), are found right and not
+/// doubted by it, though both scans leave more than 3 % of their observed surface where
+/// the other saw through. Counting every contradicted voxel, such pairs were refused (4 of
+/// 6 same-place pairs of the suite with 4 people a scan, checked through the CLI); only
+/// patches larger than a thing that moves (`olmap::align::MOVABLE_WIDTH` across,
+/// `MOVABLE_HEIGHT` tall) count now. (Rule 3's cleaner-rival test still counts every
+/// contradicted voxel: with 6 people it doubts same-place-11 over a rival 4.7 m away.)
+#[test]
+fn people_who_walked_about_in_both_scans_do_not_make_a_right_pair_untrusted() {
+    use olmap::sim::{trust_case, SimRng, TrustScene};
+    let mut rng = SimRng::new(7);
+    for k in [2, 11] {
+        let case = trust_case(1, TrustScene::SamePlace, k).unwrap();
+        let source = with_people(&case.source, 6, &mut rng);
+        let target = with_people(&case.target, 6, &mut rng);
+        let r = align::register(&source, &target, &RegisterParams::default()).unwrap();
+        let c = r.consistency.expect("refined");
+        eprintln!("{}: {:?} {c:?}", case.name, r.doubts);
+        assert!(case.is_right(&r.pose).unwrap(), "{}", case.name);
+        let (s, t) = (c.source, c.target.expect("both sides"));
+        assert!(
+            s.agreement() < 0.97 && t.agreement() < 0.97,
+            "{}: the people left too little where the other saw through to test: {c:?}",
+            case.name
+        );
+        assert!(
+            !r.doubts.iter().any(|d| d.starts_with("both scans leave")),
+            "{}: {:?}",
+            case.name,
+            r.doubts
+        );
+    }
 }
 
 /// Audit 1: a real 3DTK scan mirrored (y -> -y) against the original has no rigid
